@@ -1,0 +1,32 @@
+# Project-wide compile settings, applied through an INTERFACE target so that
+# third-party headers are not affected and every module opts in explicitly.
+add_library(proprio_options INTERFACE)
+add_library(proprio::options ALIAS proprio_options)
+target_compile_features(proprio_options INTERFACE cxx_std_20)
+target_compile_options(proprio_options INTERFACE
+  -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Woverloaded-virtual)
+if(PROPRIO_WERROR)
+  target_compile_options(proprio_options INTERFACE -Werror)
+endif()
+
+if(PROPRIO_FUZZ)
+  # Instrument every library for coverage so libFuzzer can steer into the
+  # parsers; only the fuzz executables link the fuzzer runtime itself.
+  add_compile_options(-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined)
+elseif(PROPRIO_SANITIZE)
+  list(JOIN PROPRIO_SANITIZE "," _proprio_san)
+  add_compile_options(-fsanitize=${_proprio_san} -fno-omit-frame-pointer -fno-sanitize-recover=all)
+  add_link_options(-fsanitize=${_proprio_san})
+endif()
+
+# Helper: a library in the Proprio layout (include/proprio/<name>/, src/).
+function(proprio_add_library name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
+  add_library(proprio_${name} ${ARG_SOURCES})
+  add_library(proprio::${name} ALIAS proprio_${name})
+  target_include_directories(proprio_${name} PUBLIC
+    $<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>)
+  target_link_libraries(proprio_${name} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE proprio::options ${ARG_PRIVATE_DEPS})
+  set_target_properties(proprio_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+endfunction()

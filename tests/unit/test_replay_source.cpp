@@ -1,0 +1,247 @@
+#include "proprio/core/replay_source.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+
+namespace proprio {
+namespace {
+
+namespace fs = std::filesystem;
+
+class TempDir {
+ public:
+  TempDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path_ = fs::temp_directory_path() /
+            ("proprio_replay_" + std::to_string(::getpid()) + "_" + info->test_suite_name() + "_" + info->name());
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  fs::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  fs::path path_;
+};
+
+// The analytic motion: the wrist moves at constant velocity and the whole hand
+// turns at a constant rate about a fixed world axis, so lerp (position of the
+// wrist) and slerp (every orientation) reproduce it exactly between samples.
+const Vec3 kP0(0.1, 1.2, -0.4);
+const Vec3 kVelocity(0.3, -0.2, 0.5);      // m/s
+const Vec3 kOmega = Vec3(0.2, 1.0, -0.4).normalized() * 2.0;  // rad/s
+constexpr TimeNs kStart = 2 * kNsPerSecond;
+constexpr TimeNs kStep = 10 * kNsPerMillisecond;  // 100 Hz
+constexpr int kSamples = 101;                      // 1 s
+
+Vec3 joint_offset(std::size_t i) {
+  if (joint_at(i) == HandJoint::wrist) return Vec3::Zero();
+  return Vec3(0.01 * static_cast<double>(i % 5), 0.02 * static_cast<double>(i / 5), -0.005 * static_cast<double>(i));
+}
+Quat joint_rest(std::size_t i) { return so3_exp(Vec3(0.05, -0.03, 0.02) * static_cast<double>(i)); }
+
+Quat hand_rotation(TimeNs t) { return so3_exp(kOmega * ns_to_seconds(t - kStart)); }
+Vec3 wrist_position(TimeNs t) { return kP0 + kVelocity * ns_to_seconds(t - kStart); }
+
+HandPose analytic_pose(TimeNs t, Handedness hand, const Vec3& shift = Vec3::Zero()) {
+  HandPose p;
+  p.time_ns = t;
+  p.hand = hand;
+  p.active = true;
+  p.set_all_flags(kJointFullyTracked);
+  const Quat R = hand_rotation(t);
+  for (std::size_t i = 0; i < kHandJointCount; ++i) {
+    p.T_world_joint[i].q = (R * joint_rest(i)).normalized();
+    p.T_world_joint[i].p = wrist_position(t) + R * joint_offset(i) + shift;
+    p.radius_m[i] = 0.01;
+  }
+  return p;
+}
+
+struct StreamSpec {
+  std::string name;
+  Handedness hand;
+  Vec3 shift = Vec3::Zero();
+};
+
+void write_recording(const fs::path& path, const std::vector<StreamSpec>& specs) {
+  auto w = RecordingWriter::create(path, {.overwrite = true});
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const StreamId imu = w->add_stream(StreamKind::imu, "imu/0").value();
+  std::vector<StreamId> ids;
+  for (const auto& s : specs) ids.push_back(w->add_stream(StreamKind::hand_pose, s.name).value());
+  for (int k = 0; k < kSamples; ++k) {
+    const TimeNs t = kStart + k * kStep;
+    ASSERT_TRUE(w->write(imu, ImuSample{}, t).ok());
+    for (std::size_t i = 0; i < specs.size(); ++i) {
+      ASSERT_TRUE(w->write(ids[i], analytic_pose(t, specs[i].hand, specs[i].shift)).ok());
+    }
+  }
+  ASSERT_TRUE(w->close().ok());
+}
+
+ReplayOptions with_offset(DurationNs offset_ns) {
+  ReplayOptions o;
+  o.time_offset_ns = offset_ns;
+  return o;
+}
+
+const std::vector<StreamSpec> kTrackedAndTruth = {
+    {"hand/right/ground_truth", Handedness::right, Vec3(1.0, 0.0, 0.0)},
+    {"hand/right", Handedness::right},
+};
+
+TEST(ReplayHandSource, InterpolatesAnalyticMotionBetweenSamples) {
+  TempDir dir;
+  write_recording(dir / "motion.prec", kTrackedAndTruth);
+  constexpr DurationNs kOffset = 5 * kNsPerSecond;
+  auto src = ReplayHandSource::open(dir / "motion.prec", with_offset(kOffset));
+  ASSERT_TRUE(src.ok()) << src.error().message;
+
+  EXPECT_EQ(src->name(), "replay");
+  EXPECT_TRUE(src->available(Handedness::right));
+  EXPECT_FALSE(src->available(Handedness::left));
+  EXPECT_EQ(src->file_time_range().first_ns, kStart);
+  EXPECT_EQ(src->file_time_range().last_ns, kStart + (kSamples - 1) * kStep);
+  ASSERT_EQ(src->streams().size(), 1u);
+  EXPECT_EQ(src->streams()[0].name, "hand/right") << "tracker output is preferred over ground truth";
+  EXPECT_EQ(src->streams()[0].samples, static_cast<std::size_t>(kSamples));
+  EXPECT_TRUE(src->recording_summary().clean());
+
+  HandSource& source = *src;
+  for (const TimeNs file_t : {kStart + 3 * kStep + kStep / 2, kStart + 57 * kStep + 1'234'567, kStart + 99 * kStep + 1}) {
+    SCOPED_TRACE("file time " + std::to_string(file_t));
+    auto pose = source.pose_at(Handedness::right, file_t + kOffset);
+    ASSERT_TRUE(pose.ok()) << pose.error().message;
+    EXPECT_EQ(pose->time_ns, file_t + kOffset);
+    EXPECT_TRUE(pose->active);
+    EXPECT_LT((pose->joint(HandJoint::wrist).p - wrist_position(file_t)).norm(), 1e-12);
+    const Quat R = hand_rotation(file_t);
+    for (std::size_t i = 0; i < kHandJointCount; ++i) {
+      EXPECT_LT(angle_between(pose->T_world_joint[i].q, R * joint_rest(i)), 1e-9) << to_string(joint_at(i));
+      // Positions off the rotation axis move on arcs; lerp cuts the chord: r ω² dt² / 8 < 1e-5 m.
+      EXPECT_LT((pose->T_world_joint[i].p - (wrist_position(file_t) + R * joint_offset(i))).norm(), 1e-5);
+    }
+  }
+}
+
+TEST(ReplayHandSource, SampleTimesReturnTheRecordedPose) {
+  TempDir dir;
+  write_recording(dir / "m.prec", kTrackedAndTruth);
+  auto src = ReplayHandSource::open(dir / "m.prec");
+  ASSERT_TRUE(src.ok()) << src.error().message;
+  const TimeNs t = kStart + 42 * kStep;
+  auto pose = src->pose_at(Handedness::right, t);
+  ASSERT_TRUE(pose.ok());
+  const HandPose expected = analytic_pose(t, Handedness::right);
+  for (std::size_t i = 0; i < kHandJointCount; ++i) {
+    EXPECT_EQ(pose->T_world_joint[i].p, expected.T_world_joint[i].p);
+    EXPECT_EQ(pose->T_world_joint[i].q.coeffs(), expected.T_world_joint[i].q.coeffs());
+  }
+}
+
+TEST(ReplayHandSource, QueriesOutsideTheRecordingAreOutOfRange) {
+  TempDir dir;
+  write_recording(dir / "m.prec", kTrackedAndTruth);
+  auto src = ReplayHandSource::open(dir / "m.prec", with_offset(-kStart));
+  ASSERT_TRUE(src.ok());
+  const FileTimeRange range = src->file_time_range();
+
+  auto before = src->pose_at(Handedness::right, range.first_ns - kStart - 1);
+  ASSERT_FALSE(before.ok());
+  EXPECT_EQ(before.error().code, Errc::out_of_range);
+  EXPECT_NE(before.error().message.find("file time " + std::to_string(range.first_ns - 1)), std::string::npos)
+      << before.error().message;
+
+  auto after = src->pose_at(Handedness::right, range.last_ns - kStart + 1);
+  ASSERT_FALSE(after.ok());
+  EXPECT_EQ(after.error().code, Errc::out_of_range);
+
+  EXPECT_TRUE(src->pose_at(Handedness::right, range.first_ns - kStart).ok());
+  EXPECT_TRUE(src->pose_at(Handedness::right, range.last_ns - kStart).ok());
+
+  auto left = src->pose_at(Handedness::left, 0);
+  ASSERT_FALSE(left.ok());
+  EXPECT_EQ(left.error().code, Errc::unavailable);
+  EXPECT_NE(left.error().message.find("no left-hand poses"), std::string::npos) << left.error().message;
+
+  // Re-anchoring the offset moves the playable window.
+  src->set_time_offset_ns(100 * kNsPerSecond - range.first_ns);
+  EXPECT_TRUE(src->pose_at(Handedness::right, 100 * kNsPerSecond).ok());
+  EXPECT_FALSE(src->pose_at(Handedness::right, 0).ok());
+}
+
+TEST(ReplayHandSource, StreamSelection) {
+  TempDir dir;
+  write_recording(dir / "m.prec", kTrackedAndTruth);
+  const TimeNs t = kStart + 10 * kStep;
+
+  auto truth = ReplayHandSource::open(dir / "m.prec", {.stream_name_filter = "ground_truth"});
+  ASSERT_TRUE(truth.ok()) << truth.error().message;
+  EXPECT_NEAR(truth->pose_at(Handedness::right, t)->joint(HandJoint::wrist).p.x(), wrist_position(t).x() + 1.0, 1e-12);
+
+  auto exact = ReplayHandSource::open(dir / "m.prec", {.stream_name_filter = "hand/right"});
+  ASSERT_TRUE(exact.ok()) << "an exact name wins over substring matches: " << exact.error().message;
+  EXPECT_EQ(exact->streams()[0].name, "hand/right");
+
+  auto none = ReplayHandSource::open(dir / "m.prec", {.stream_name_filter = "vist"});
+  ASSERT_FALSE(none.ok());
+  EXPECT_EQ(none.error().code, Errc::not_found);
+  EXPECT_NE(none.error().message.find("'hand/right/ground_truth', 'hand/right'"), std::string::npos)
+      << none.error().message;
+
+  write_recording(dir / "gt_only.prec", {{"hand/left/ground_truth", Handedness::left}});
+  auto fallback = ReplayHandSource::open(dir / "gt_only.prec");
+  ASSERT_TRUE(fallback.ok()) << fallback.error().message;
+  EXPECT_TRUE(fallback->available(Handedness::left));
+  EXPECT_FALSE(fallback->available(Handedness::right));
+
+  write_recording(dir / "two.prec", {{"hand/right/vist", Handedness::right}, {"hand/right/glove", Handedness::right},
+                                     {"hand/left/glove", Handedness::left}});
+  auto ambiguous = ReplayHandSource::open(dir / "two.prec");
+  ASSERT_FALSE(ambiguous.ok());
+  EXPECT_EQ(ambiguous.error().code, Errc::invalid_argument);
+  EXPECT_NE(ambiguous.error().message.find("right-hand poses in several streams"), std::string::npos)
+      << ambiguous.error().message;
+  EXPECT_NE(ambiguous.error().message.find("stream_name_filter"), std::string::npos);
+  auto glove = ReplayHandSource::open(dir / "two.prec", {.stream_name_filter = "glove"});
+  ASSERT_TRUE(glove.ok()) << glove.error().message;
+  EXPECT_TRUE(glove->available(Handedness::left));
+  EXPECT_TRUE(glove->available(Handedness::right));
+}
+
+TEST(ReplayHandSource, RecordingWithoutHandPosesIsAnError) {
+  TempDir dir;
+  write_recording(dir / "imu.prec", {});
+  auto src = ReplayHandSource::open(dir / "imu.prec");
+  ASSERT_FALSE(src.ok());
+  EXPECT_EQ(src.error().code, Errc::not_found);
+  EXPECT_NE(src.error().message.find("no hand_pose stream"), std::string::npos) << src.error().message;
+  EXPECT_NE(src.error().message.find("'imu/0' (imu)"), std::string::npos) << src.error().message;
+
+  auto missing = ReplayHandSource::open(dir / "nothing.prec");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.error().code, Errc::not_found);
+}
+
+TEST(ReplayHandSource, TruncatedRecordingReplaysItsCompleteRecordsAndMoves) {
+  TempDir dir;
+  const fs::path path = dir / "cut.prec";
+  write_recording(path, {{"hand/right", Handedness::right}});
+  fs::resize_file(path, fs::file_size(path) - 1000);  // the End record and part of the last pose
+  auto opened = ReplayHandSource::open(path);
+  ASSERT_TRUE(opened.ok()) << opened.error().message;
+  ReplayHandSource src = std::move(opened.value());
+  EXPECT_EQ(src.recording_summary().end, RecordingEnd::truncated);
+  EXPECT_EQ(src.streams()[0].samples, static_cast<std::size_t>(kSamples - 1));
+  EXPECT_EQ(src.file_time_range().last_ns, kStart + (kSamples - 2) * kStep);
+  EXPECT_TRUE(src.pose_at(Handedness::right, kStart + 5 * kStep + 7).ok());
+}
+
+}  // namespace
+}  // namespace proprio

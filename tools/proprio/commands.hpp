@@ -1,0 +1,10 @@
+#pragma once
+#include <CLI/CLI.hpp>
+
+namespace proprio::cli {
+
+// Each registers its subcommand; the callback runs it and sets the exit code.
+void add_sim_hand_command(CLI::App& app, int& exit_code);
+void add_replay_command(CLI::App& app, int& exit_code);
+
+}  // namespace proprio::cli

@@ -265,7 +265,7 @@ Bytes file_header(std::uint16_t major, std::uint16_t minor) {
   Bytes h = {0x89, 'P', 'R', 'P', '\r', '\n', 0x1A, '\n'};
   for (int i = 0; i < 2; ++i) h.push_back(static_cast<std::uint8_t>(major >> (8 * i)));
   for (int i = 0; i < 2; ++i) h.push_back(static_cast<std::uint8_t>(minor >> (8 * i)));
-  h.insert(h.end(), {20, 0, 0, 0});
+  for (const std::uint8_t b : {20, 0, 0, 0}) h.push_back(b);
   const std::uint32_t crc = crc32_ieee(h);
   for (int i = 0; i < 4; ++i) h.push_back(static_cast<std::uint8_t>(crc >> (8 * i)));
   return h;
@@ -285,9 +285,10 @@ void append_record(Bytes& out, std::uint8_t type, StreamId stream, TimeNs t, con
   out.insert(out.end(), r.begin(), r.end());
 }
 Bytes stream_def(StreamKind kind, const std::string& name) {
-  Bytes p = {static_cast<std::uint8_t>(kind), 0, static_cast<std::uint8_t>(name.size()), 0};
-  p.insert(p.end(), name.begin(), name.end());
-  p.insert(p.end(), {0, 0, 0, 0});
+  Bytes p(4 + name.size() + 4, 0);  // kind, reserved, name length, name, empty meta
+  p[0] = static_cast<std::uint8_t>(kind);
+  p[2] = static_cast<std::uint8_t>(name.size());
+  std::copy(name.begin(), name.end(), p.begin() + 4);
   return p;
 }
 // Recomputes the CRC of the record starting at offset (after a test edited it).
@@ -536,7 +537,7 @@ TEST(Recording, RemovedRecordIsCaughtByTheEndCount) {
 TEST(Recording, BytesAfterTheEndRecordAreReported) {
   TempDir dir;
   Bytes file = session_bytes(dir / "g.prec", pose_session(2));
-  file.insert(file.end(), {1, 2, 3});
+  for (const std::uint8_t b : {1, 2, 3}) file.push_back(b);
   const ReadBack back = read_all(file);
   EXPECT_EQ(back.records.size(), 2u);
   EXPECT_EQ(back.summary.end, RecordingEnd::clean);

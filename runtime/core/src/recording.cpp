@@ -28,8 +28,6 @@ constexpr std::size_t kRecordCrcBytes = 4;
 constexpr StreamId kFileLevelStream = 0xFFFF;  // End and other records that belong to no stream
 constexpr std::size_t kMaxNameBytes = 255;
 constexpr std::size_t kMarkerBytes = 13;
-constexpr std::size_t kHandPoseJointBytes = 64;     // 7 pose + 1 radius doubles
-constexpr std::size_t kHandVelocityJointBytes = 48;  // 6 doubles
 
 enum class RecordType : std::uint8_t { stream_def = 1, data = 2, end = 3 };
 
@@ -521,8 +519,9 @@ struct RecordingWriter::Impl {
     store_le<4>(scratch.data() + scratch.size() - kRecordCrcBytes, crc);
     if (std::fwrite(scratch.data(), 1, scratch.size(), file.get()) != scratch.size()) {
       failure = make_error(Errc::io_error, "writing " + where() + " failed (" + std::strerror(errno) +
-                                               "); records before this one are readable; free disk space "
-                                               "or check the device, then start a new recording");
+                                               "); the file reads up to the last record that reached the "
+                                               "disk; free disk space or check the device, then start a new "
+                                               "recording");
       return *failure;
     }
     ++records;

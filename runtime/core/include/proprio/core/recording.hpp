@@ -125,7 +125,8 @@ struct RecordingWriterOptions {
 
 // Appends records to a new file. Bytes go out through a buffer; flush() pushes
 // them to the OS. A crash at any moment leaves a file that reads up to its last
-// complete record. Not thread-safe: one owner writes.
+// complete record. Not thread-safe: one owner writes. A moved-from writer may
+// only be destroyed or assigned to.
 class RecordingWriter {
  public:
   // Writes and flushes the file header. Refuses an existing file unless

@@ -17,6 +17,10 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   proprio::cli::add_sim_hand_command(app, exit_code);
   proprio::cli::add_replay_command(app, exit_code);
+#ifdef PROPRIO_HAVE_OPENXR_LAYER
+  proprio::cli::add_layer_commands(app, exit_code);
+  proprio::cli::add_xr_probe_command(app, exit_code);
+#endif
   app.parse_complete_callback([&] {
     if (auto s = proprio::set_log_level(log_level); !s) throw CLI::ValidationError("--log-level", s.error().message);
   });

@@ -161,6 +161,25 @@ Result<std::vector<double>> Config::get_doubles(std::string_view key) const {
   return out;
 }
 
+Result<std::vector<std::string>> Config::get_strings(std::string_view key) const {
+  const auto* n = find(*impl_, key);
+  if (!n) return missing(*impl_, key);
+  const auto* arr = n->as_array();
+  if (!arr) return wrong_type(*impl_, key, *n, "an array of strings");
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    const auto& e = *arr->get(i);
+    auto v = e.value_exact<std::string>();
+    if (!v) {
+      return make_error(Errc::invalid_argument, where(*impl_, &e) + ": element " + std::to_string(i) + " of '" +
+                                                    full_key(*impl_, key) + "' must be a string, but it is " +
+                                                    type_name(e));
+    }
+    out.push_back(*v);
+  }
+  return out;
+}
+
 Result<bool> Config::get_bool_or(std::string_view key, bool fallback) const {
   return contains(key) ? get_bool(key) : Result<bool>(fallback);
 }

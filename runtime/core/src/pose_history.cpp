@@ -67,31 +67,17 @@ Status PoseHistory::push(const HandPose& sample) {
   return {};
 }
 
-Result<PoseQuery> PoseHistory::query(TimeNs t) const {
-  if (size_ == 0) return make_error(Errc::unavailable, "pose history is empty");
-  const TimeNs oldest = oldest_time_ns();
+PoseLookup PoseHistory::lookup(TimeNs t, HandPose& out) const noexcept {
+  if (size_ == 0) return PoseLookup::empty;
+  if (t < oldest_time_ns()) return PoseLookup::too_old;
   const TimeNs newest_t = newest_time_ns();
-  if (t < oldest) {
-    return make_error(Errc::out_of_range, "requested time is " + ms(oldest - t) +
-                                              " older than the oldest pose kept (history spans " +
-                                              ms(newest_t - oldest) + ")");
-  }
 
-  PoseQuery out;
   if (t >= newest_t) {
     const HandPose& last = newest();
-    out.pose = last;
-    out.pose.time_ns = t;
-    if (t == newest_t) {
-      out.kind = PoseQueryKind::exact;
-      return out;
-    }
+    out = last;
+    if (t == newest_t) return PoseLookup::exact;
     const DurationNs ahead = t - newest_t;
-    if (ahead > options_.max_prediction_ns) {
-      return make_error(Errc::out_of_range, "requested time is " + ms(ahead) +
-                                                " past the newest pose; prediction is limited to " +
-                                                ms(options_.max_prediction_ns));
-    }
+    if (ahead > options_.max_prediction_ns) return PoseLookup::stale;
     std::array<Vec3, kHandJointCount> v, w;
     if (last.has_velocity) {
       v = last.linear_velocity_in_world;
@@ -104,15 +90,15 @@ Result<PoseQuery> PoseHistory::query(TimeNs t) const {
     }
     const double dt = ns_to_seconds(ahead);
     for (std::size_t i = 0; i < kHandJointCount; ++i) {
-      Pose& T = out.pose.T_world_joint[i];
+      Pose& T = out.T_world_joint[i];
       T.p += v[i] * dt;
       T.q = (so3_exp(w[i] * dt) * T.q).normalized();
     }
-    out.pose.has_velocity = true;
-    out.pose.linear_velocity_in_world = v;
-    out.pose.angular_velocity_in_world = w;
-    out.kind = PoseQueryKind::predicted;
-    return out;
+    out.time_ns = t;
+    out.has_velocity = true;
+    out.linear_velocity_in_world = v;
+    out.angular_velocity_in_world = w;
+    return PoseLookup::predicted;
   }
 
   // Binary search for the first sample newer than t; the ring is time-sorted.
@@ -124,43 +110,64 @@ Result<PoseQuery> PoseHistory::query(TimeNs t) const {
   const HandPose& a = at(lo);
   const HandPose& b = at(hi);
   if (a.time_ns == t) {
-    out.pose = a;
-    out.kind = PoseQueryKind::exact;
-    return out;
+    out = a;
+    return PoseLookup::exact;
   }
-  if (b.time_ns - a.time_ns > options_.max_interpolation_gap_ns) {
-    return make_error(Errc::unavailable, "no pose near the requested time: it falls in a " +
-                                             ms(b.time_ns - a.time_ns) + " gap between samples (limit " +
-                                             ms(options_.max_interpolation_gap_ns) + ")");
-  }
+  if (b.time_ns - a.time_ns > options_.max_interpolation_gap_ns) return PoseLookup::gap;
   if (a.active != b.active || a.hand != b.hand) {
     // Interpolating into or out of an inactive pose would invent data; the nearer one wins.
-    out.pose = (t - a.time_ns <= b.time_ns - t) ? a : b;
-    out.pose.time_ns = t;
-    out.kind = PoseQueryKind::interpolated;
-    return out;
+    out = (t - a.time_ns <= b.time_ns - t) ? a : b;
+    out.time_ns = t;
+    return PoseLookup::interpolated;
   }
   const double s = static_cast<double>(t - a.time_ns) / static_cast<double>(b.time_ns - a.time_ns);
-  out.pose = a;
-  out.pose.time_ns = t;
+  out = a;
+  out.time_ns = t;
   for (std::size_t i = 0; i < kHandJointCount; ++i) {
-    out.pose.T_world_joint[i] = interpolate(a.T_world_joint[i], b.T_world_joint[i], s);
-    out.pose.radius_m[i] = a.radius_m[i] + s * (b.radius_m[i] - a.radius_m[i]);
-    out.pose.flags[i] = a.flags[i] & b.flags[i];
+    out.T_world_joint[i] = interpolate(a.T_world_joint[i], b.T_world_joint[i], s);
+    out.radius_m[i] = a.radius_m[i] + s * (b.radius_m[i] - a.radius_m[i]);
+    out.flags[i] = a.flags[i] & b.flags[i];
   }
   if (a.has_velocity && b.has_velocity) {
     for (std::size_t i = 0; i < kHandJointCount; ++i) {
-      out.pose.linear_velocity_in_world[i] =
+      out.linear_velocity_in_world[i] =
           a.linear_velocity_in_world[i] + s * (b.linear_velocity_in_world[i] - a.linear_velocity_in_world[i]);
-      out.pose.angular_velocity_in_world[i] =
+      out.angular_velocity_in_world[i] =
           a.angular_velocity_in_world[i] + s * (b.angular_velocity_in_world[i] - a.angular_velocity_in_world[i]);
     }
   } else {
-    finite_difference(a, b, out.pose.linear_velocity_in_world, out.pose.angular_velocity_in_world);
-    out.pose.has_velocity = true;
+    finite_difference(a, b, out.linear_velocity_in_world, out.angular_velocity_in_world);
+    out.has_velocity = true;
   }
-  out.kind = PoseQueryKind::interpolated;
-  return out;
+  return PoseLookup::interpolated;
+}
+
+Result<PoseQuery> PoseHistory::query(TimeNs t) const {
+  PoseQuery q;
+  switch (lookup(t, q.pose)) {
+    case PoseLookup::exact: q.kind = PoseQueryKind::exact; return q;
+    case PoseLookup::interpolated: q.kind = PoseQueryKind::interpolated; return q;
+    case PoseLookup::predicted: q.kind = PoseQueryKind::predicted; return q;
+    case PoseLookup::empty: return make_error(Errc::unavailable, "pose history is empty");
+    case PoseLookup::too_old:
+      return make_error(Errc::out_of_range, "requested time is " + ms(oldest_time_ns() - t) +
+                                                " older than the oldest pose kept (history spans " +
+                                                ms(newest_time_ns() - oldest_time_ns()) + ")");
+    case PoseLookup::stale:
+      return make_error(Errc::out_of_range, "requested time is " + ms(t - newest_time_ns()) +
+                                                " past the newest pose; prediction is limited to " +
+                                                ms(options_.max_prediction_ns));
+    case PoseLookup::gap: break;
+  }
+  // Find the gap again for the message; this path is not hot.
+  TimeNs before = oldest_time_ns(), after = newest_time_ns();
+  for (std::size_t i = 0; i < size_; ++i) {
+    if (at(i).time_ns <= t) before = at(i).time_ns;
+    else { after = at(i).time_ns; break; }
+  }
+  return make_error(Errc::unavailable, "no pose near the requested time: it falls in a " + ms(after - before) +
+                                           " gap between samples (limit " + ms(options_.max_interpolation_gap_ns) +
+                                           ")");
 }
 
 }  // namespace proprio

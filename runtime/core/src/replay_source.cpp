@@ -129,7 +129,29 @@ Result<ReplayHandSource> ReplayHandSource::open(const std::filesystem::path& pat
   src.summary_ = load->summary();
   src.path_ = path.string();
   src.offset_ns_ = options.time_offset_ns;
+  src.loop_ = options.loop;
   return src;
+}
+
+bool ReplayHandSource::to_file_time(TimeNs t_ns, TimeNs& file_t) const noexcept {
+  if (__builtin_sub_overflow(t_ns, offset_ns_, &file_t)) return false;
+  const DurationNs span = range_.last_ns - range_.first_ns;
+  if (loop_ && span > 0) {
+    DurationNs into = (file_t - range_.first_ns) % span;
+    if (into < 0) into += span;
+    file_t = range_.first_ns + into;
+  }
+  return true;
+}
+
+PoseLookup ReplayHandSource::lookup(Handedness hand, TimeNs t_ns, HandPose& out) noexcept {
+  if (!available(hand)) return PoseLookup::empty;
+  TimeNs file_t = 0;
+  if (!to_file_time(t_ns, file_t)) return PoseLookup::too_old;
+  const PoseLookup r = history(hand).lookup(file_t, out);
+  if (is_usable(r)) out.time_ns = t_ns;
+  if (r == PoseLookup::stale) out.time_ns += t_ns - file_t;  // back to the caller's clock
+  return r;
 }
 
 bool ReplayHandSource::available(Handedness hand) const noexcept {
@@ -142,7 +164,7 @@ Result<HandPose> ReplayHandSource::pose_at(Handedness hand, TimeNs t_ns) {
     return make_error(Errc::unavailable, "replay of '" + path_ + "' has no " + hand_name + "-hand poses");
   }
   TimeNs file_t = 0;
-  if (__builtin_sub_overflow(t_ns, offset_ns_, &file_t)) {
+  if (!to_file_time(t_ns, file_t)) {
     return make_error(Errc::out_of_range, "replay of '" + path_ + "': t=" + std::to_string(t_ns) +
                                               " ns minus the time offset overflows");
   }

@@ -26,6 +26,7 @@ class Config {
   Result<double> get_double(std::string_view key) const;
   Result<std::string> get_string(std::string_view key) const;
   Result<std::vector<double>> get_doubles(std::string_view key) const;
+  Result<std::vector<std::string>> get_strings(std::string_view key) const;
 
   // Optional values: the fallback when absent, an error when present but of
   // the wrong type or outside [min, max] (a typo'd value must not pass silently).

@@ -5,6 +5,7 @@
 #include <string_view>
 
 #include "proprio/core/hand_pose.hpp"
+#include "proprio/core/pose_history.hpp"
 #include "proprio/core/result.hpp"
 
 namespace proprio {
@@ -24,6 +25,12 @@ class HandSource {
   // source. Errors are honest: Errc::out_of_range when t is outside what the
   // source can serve, Errc::unavailable when it has no data for that hand.
   virtual Result<HandPose> pose_at(Handedness hand, TimeNs t_ns) = 0;
+
+  // The same for hot paths (the OpenXR layer, the haptics loop): no
+  // allocation, no message. Safe to call from several threads at once.
+  // PoseLookup::stale fills `out` with the newest pose (and its own time) so a
+  // caller can still show it, flagged as not tracked.
+  virtual PoseLookup lookup(Handedness hand, TimeNs t_ns, HandPose& out) noexcept = 0;
 };
 
 }  // namespace proprio

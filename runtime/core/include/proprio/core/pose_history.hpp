@@ -24,6 +24,20 @@ struct PoseHistoryOptions {
 enum class PoseQueryKind { exact, interpolated, predicted };
 const char* to_string(PoseQueryKind k) noexcept;
 
+// Outcome of the non-allocating lookup() used on hot paths.
+enum class PoseLookup {
+  exact,         // out = the sample at that time
+  interpolated,  // out = between two samples
+  predicted,     // out = extrapolated within max_prediction_ns
+  stale,         // past the prediction horizon: out = the newest sample, with its own time
+  too_old,       // before the oldest sample kept: out untouched
+  gap,           // inside a gap wider than max_interpolation_gap_ns: out untouched
+  empty,         // nothing pushed yet: out untouched
+};
+constexpr bool is_usable(PoseLookup r) noexcept {
+  return r == PoseLookup::exact || r == PoseLookup::interpolated || r == PoseLookup::predicted;
+}
+
 struct PoseQuery {
   HandPose pose;  // pose.time_ns == requested time
   PoseQueryKind kind = PoseQueryKind::exact;
@@ -39,6 +53,8 @@ class PoseHistory {
 
   // Errors (Errc::out_of_range / unavailable) say which bound was hit and by how much.
   Result<PoseQuery> query(TimeNs t_ns) const;
+  // The same without allocating or building messages, for hot paths.
+  PoseLookup lookup(TimeNs t_ns, HandPose& out) const noexcept;
 
   std::size_t size() const noexcept { return size_; }
   bool empty() const noexcept { return size_ == 0; }

@@ -21,6 +21,7 @@ struct ReplayOptions {
   DurationNs time_offset_ns = 0;  // file time = t - time_offset_ns
   DurationNs max_interpolation_gap_ns = 200 * kNsPerMillisecond;  // wider gaps are reported, not bridged
   DurationNs max_prediction_ns = 0;  // past the last sample: 0 serves recorded time only
+  bool loop = false;  // play the recording over and over (time wraps at its end)
 };
 
 struct FileTimeRange {
@@ -46,6 +47,7 @@ class ReplayHandSource final : public HandSource {
   // Errc::out_of_range outside the recorded span (after the offset mapping),
   // Errc::unavailable for a hand without poses or inside a gap.
   Result<HandPose> pose_at(Handedness hand, TimeNs t_ns) override;
+  PoseLookup lookup(Handedness hand, TimeNs t_ns, HandPose& out) noexcept override;
 
   FileTimeRange file_time_range() const noexcept { return range_; }
   DurationNs time_offset_ns() const noexcept { return offset_ns_; }
@@ -61,11 +63,13 @@ class ReplayHandSource final : public HandSource {
  private:
   ReplayHandSource() = default;
   const PoseHistory& history(Handedness hand) const { return histories_[static_cast<std::size_t>(hand)]; }
+  bool to_file_time(TimeNs t_ns, TimeNs& file_t) const noexcept;
 
   std::string path_;
   std::vector<PoseHistory> histories_;  // indexed by Handedness
   FileTimeRange range_;
   DurationNs offset_ns_ = 0;
+  bool loop_ = false;
   std::vector<ReplayStream> streams_;
   RecordingSummary summary_;
   std::size_t skipped_ = 0;

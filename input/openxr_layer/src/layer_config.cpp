@@ -1,0 +1,246 @@
+#include "proprio/openxr_layer/layer_config.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "proprio/core/config.hpp"
+
+namespace proprio::openxr_layer {
+
+std::string_view to_string(SourceType t) noexcept { return t == SourceType::sim ? "sim" : "replay"; }
+
+std::string_view to_string(ReferenceSpace s) noexcept {
+  switch (s) {
+    case ReferenceSpace::view: return "view";
+    case ReferenceSpace::local: return "local";
+    case ReferenceSpace::stage: return "stage";
+  }
+  return "?";
+}
+
+std::string_view to_string(RuntimeHandTracking m) noexcept {
+  switch (m) {
+    case RuntimeHandTracking::automatic: return "auto";
+    case RuntimeHandTracking::override_it: return "override";
+    case RuntimeHandTracking::pass_through: return "passthrough";
+  }
+  return "?";
+}
+
+std::string SourceConfig::describe() const {
+  std::string hand_list;
+  for (auto h : hands) hand_list += (hand_list.empty() ? "" : "+") + std::string(proprio::to_string(h));
+  char buf[512];
+  const Vec3 rv = so3_log(T_space_source.q);
+  std::snprintf(buf, sizeof buf, "%s source for %s hand(s), bound to %s space at offset (%.3f, %.3f, %.3f) m, rotation (%.1f, %.1f, %.1f) deg",
+                std::string(to_string(type)).c_str(), hand_list.c_str(), std::string(to_string(space)).c_str(),
+                T_space_source.p.x(), T_space_source.p.y(), T_space_source.p.z(), rv.x() * 57.2958,
+                rv.y() * 57.2958, rv.z() * 57.2958);
+  std::string s = buf;
+  if (type == SourceType::sim) {
+    std::snprintf(buf, sizeof buf, "; protocol %s, subject %d, seed %llu, %.1f Hz",
+                  std::string(sim::to_string(protocol)).c_str(), subject, static_cast<unsigned long long>(seed),
+                  rate_hz);
+  } else {
+    std::snprintf(buf, sizeof buf, "; file %s%s", path.c_str(), loop ? ", looped" : "");
+  }
+  return s + buf;
+}
+
+std::string LayerConfig::describe() const {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%s: runtime_hand_tracking=%s max_prediction=%.1fms stale_timeout=%.1fms, %zu source(s)",
+                origin.c_str(), std::string(to_string(runtime_hand_tracking)).c_str(),
+                static_cast<double>(max_prediction_ns) * 1e-6, static_cast<double>(stale_timeout_ns) * 1e-6,
+                sources.size());
+  std::string s = buf;
+  for (std::size_t i = 0; i < sources.size(); ++i) s += "\n  [" + std::to_string(i) + "] " + sources[i].describe();
+  return s;
+}
+
+std::filesystem::path default_layer_config_path() {
+  if (const char* p = std::getenv("PROPRIO_LAYER_CONFIG"); p && *p) return p;
+  if (const char* x = std::getenv("XDG_CONFIG_HOME"); x && *x) return std::filesystem::path(x) / "proprio" / "layer.toml";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::filesystem::path(h) / ".config" / "proprio" / "layer.toml";
+  return "layer.toml";
+}
+
+namespace {
+
+template <typename T>
+Result<T> choose(const Config& c, std::string_view key, std::string fallback,
+                 std::initializer_list<std::pair<const char*, T>> options) {
+  auto v = c.get_string_or(key, std::move(fallback));
+  if (!v) return v.error();
+  std::string allowed;
+  for (const auto& [name, value] : options) {
+    if (*v == name) return value;
+    allowed += (allowed.empty() ? "" : ", ") + std::string(name);
+  }
+  return make_error(Errc::invalid_argument, c.source_name() + ": '" + std::string(key) + "' = \"" + *v +
+                                                "\" is not one of: " + allowed);
+}
+
+Result<Vec3> vec3(const Config& c, std::string_view key) {
+  if (!c.contains(key)) return Vec3(Vec3::Zero());
+  auto v = c.get_doubles(key);
+  if (!v) return v.error();
+  if (v->size() != 3) {
+    return make_error(Errc::invalid_argument,
+                      c.source_name() + ": '" + std::string(key) + "' needs 3 numbers, got " + std::to_string(v->size()));
+  }
+  return Vec3((*v)[0], (*v)[1], (*v)[2]);
+}
+
+Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
+  const std::string where = c.source_name() + ": [[source]] #" + std::to_string(index + 1);
+  SourceConfig s;
+  auto type = choose<SourceType>(c, "type", "", {{"sim", SourceType::sim}, {"replay", SourceType::replay}});
+  if (!type) return type.error().with_context(where);
+  s.type = *type;
+  auto space = choose<ReferenceSpace>(c, "space", s.type == SourceType::sim ? "view" : "local",
+                                      {{"view", ReferenceSpace::view}, {"local", ReferenceSpace::local},
+                                       {"stage", ReferenceSpace::stage}});
+  if (!space) return space.error().with_context(where);
+  s.space = *space;
+
+  if (c.contains("hands")) {
+    auto names = c.get_strings("hands");
+    if (!names) return names.error().with_context(where);
+    s.hands.clear();
+    for (const auto& n : *names) {
+      auto h = parse_handedness(n);
+      if (!h) return make_error(Errc::invalid_argument, where + ": hands entry \"" + n + "\" is not \"left\" or \"right\"");
+      s.hands.push_back(*h);
+    }
+    if (s.hands.empty()) return make_error(Errc::invalid_argument, where + ": 'hands' is empty");
+  }
+  auto p = vec3(c, "offset_position_m");
+  if (!p) return p.error().with_context(where);
+  auto r = vec3(c, "offset_rotation_deg");
+  if (!r) return r.error().with_context(where);
+  s.T_space_source = {so3_exp(*r * (M_PI / 180.0)), *p};
+
+  if (s.type == SourceType::sim) {
+    auto protocol = c.get_string_or("protocol", "free-motion");
+    if (!protocol) return protocol.error().with_context(where);
+    auto parsed = sim::parse_motion_protocol(*protocol);
+    if (!parsed) {
+      return make_error(Errc::invalid_argument,
+                        where + ": protocol \"" + *protocol + "\" is not one of: free-motion, pinch-grasp, wrist-sweep");
+    }
+    s.protocol = *parsed;
+    auto subject = c.get_int_or("subject", 3, 0, 14);
+    if (!subject) return subject.error().with_context(where);
+    s.subject = static_cast<int>(*subject);
+    auto seed = c.get_int_or("seed", 1, 0, INT64_MAX);
+    if (!seed) return seed.error().with_context(where);
+    s.seed = static_cast<std::uint64_t>(*seed);
+    auto rate = c.get_double_or("rate_hz", 90.0, 1.0, 1000.0);
+    if (!rate) return rate.error().with_context(where);
+    s.rate_hz = *rate;
+  } else {
+    auto path = c.get_string("path");
+    if (!path) return path.error().with_context(where + " (a replay source needs the recording's path)");
+    s.path = *path;
+    auto loop = c.get_bool_or("loop", true);
+    if (!loop) return loop.error().with_context(where);
+    s.loop = *loop;
+  }
+  return s;
+}
+
+}  // namespace
+
+Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::string& source_name) {
+  auto c = Config::parse(toml_text, source_name);
+  if (!c) return c.error();
+  LayerConfig cfg;
+  cfg.origin = source_name;
+  if (c->contains("layer")) {
+    auto layer = c->table("layer");
+    if (!layer) return layer.error();
+    auto mode = choose<RuntimeHandTracking>(*layer, "runtime_hand_tracking", "auto",
+                                            {{"auto", RuntimeHandTracking::automatic},
+                                             {"override", RuntimeHandTracking::override_it},
+                                             {"passthrough", RuntimeHandTracking::pass_through}});
+    if (!mode) return mode.error();
+    cfg.runtime_hand_tracking = *mode;
+    auto pred = layer->get_double_or("max_prediction_ms", 50.0, 0.0, 500.0);
+    if (!pred) return pred.error();
+    cfg.max_prediction_ns = seconds_to_ns(*pred * 1e-3);
+    auto stale = layer->get_double_or("stale_timeout_ms", 500.0, 0.0, 10000.0);
+    if (!stale) return stale.error();
+    cfg.stale_timeout_ns = seconds_to_ns(*stale * 1e-3);
+  }
+  if (c->contains("source")) {
+    auto sources = c->tables("source");
+    if (!sources) return sources.error();
+    for (std::size_t i = 0; i < sources->size(); ++i) {
+      auto s = parse_source((*sources)[i], i);
+      if (!s) return s.error();
+      cfg.sources.push_back(std::move(*s));
+    }
+  }
+  return cfg;
+}
+
+Result<LayerConfig> load_layer_config(const std::filesystem::path& path) {
+  auto c = Config::load_file(path);
+  if (!c) return c.error();
+  // Parse through the same path as text so both entry points behave alike.
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_layer_config(text.str(), path.string());
+}
+
+std::string example_layer_config(const std::string& recording_path) {
+  std::string s = R"(# Proprio OpenXR layer configuration (docs/openxr-layer.md).
+# Units: metres, degrees, milliseconds, Hz, as each key's name says.
+
+[layer]
+# When the runtime has its own hand tracking: "auto" (use Proprio's hands when a
+# source below is configured), "override" (always Proprio) or "passthrough" (always the runtime).
+runtime_hand_tracking = "auto"
+# Furthest the layer extrapolates a hand past its newest pose.
+max_prediction_ms = 50
+# Past the prediction horizon the newest pose is reported as valid but not
+# tracked for this long; after that the hand is inactive.
+stale_timeout_ms = 500
+
+)";
+  if (recording_path.empty()) {
+    s += R"([[source]]
+# The procedural hand: a simulated subject performing a motion protocol.
+type = "sim"
+hands = ["left", "right"]
+# The reference space the source's origin is bound to: "view" (head-mounted
+# camera), "local" or "stage" (fixed setups), plus a calibrated offset.
+space = "view"
+offset_position_m = [0.0, 0.0, 0.0]
+offset_rotation_deg = [0.0, 0.0, 0.0]   # rotation vector (axis * angle), degrees
+protocol = "free-motion"                # free-motion | pinch-grasp | wrist-sweep
+subject = 3                             # 0-14
+seed = 1
+rate_hz = 90
+)";
+  } else {
+    s += R"([[source]]
+# A recorded session (proprio sim-hand, or a tracker's recording), played in a loop.
+type = "replay"
+hands = ["left", "right"]
+space = "local"
+offset_position_m = [0.0, 0.0, 0.0]
+offset_rotation_deg = [0.0, 0.0, 0.0]
+path = ")" + recording_path + R"("
+loop = true
+)";
+  }
+  return s;
+}
+
+}  // namespace proprio::openxr_layer

@@ -1,0 +1,531 @@
+// Smoke tests of the mock OpenXR runtime, driven through Debian's real OpenXR
+// loader (XR_RUNTIME_JSON), and once more under Debian's core_validation layer.
+// They also pin down mock_motion.hpp, which layer tests use for expectations.
+#include "mock_motion.hpp"
+
+#include <proprio/openxr_layer/loader_interfaces.hpp>
+
+#include <openxr/openxr.h>
+#include <openxr/openxr_platform.h>
+
+#include <gtest/gtest.h>
+
+#include <dlfcn.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <iterator>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace {
+namespace mx = proprio::mock_xr;
+
+// Sets (or unsets, with nullptr) an environment variable for one scope.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    if (const char* old = std::getenv(name)) old_ = old;
+    if (value != nullptr) {
+      setenv(name, value, 1);
+    } else {
+      unsetenv(name);
+    }
+  }
+  ~ScopedEnv() {
+    if (old_) {
+      setenv(name_.c_str(), old_->c_str(), 1);
+    } else {
+      unsetenv(name_.c_str());
+    }
+  }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  std::string name_;
+  std::optional<std::string> old_;
+};
+
+// Every test runs against the mock runtime, with no layer unless it asks.
+class MockRuntime : public ::testing::Test {
+ protected:
+  ScopedEnv runtime_{"XR_RUNTIME_JSON", PROPRIO_MOCK_RUNTIME_JSON};
+  ScopedEnv layers_{"XR_ENABLE_API_LAYERS", nullptr};
+  ScopedEnv hand_tracking_{"PROPRIO_MOCK_RUNTIME_HAND_TRACKING", nullptr};
+};
+
+// A zeroed OpenXR structure of the given type (GCC's -Wextra flags `T{type}`).
+template <class T>
+T make(XrStructureType type) {
+  T value{};
+  value.type = type;
+  return value;
+}
+
+template <class Handle>
+Handle to_handle(uint64_t id) {
+  return reinterpret_cast<Handle>(static_cast<std::uintptr_t>(id));
+}
+
+XrResult create_instance(std::vector<const char*> extensions, XrInstance* instance) {
+  auto info = make<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
+  std::snprintf(info.applicationInfo.applicationName, XR_MAX_APPLICATION_NAME_SIZE, "mock_runtime_tests");
+  info.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
+  info.enabledExtensionCount = static_cast<uint32_t>(extensions.size());
+  info.enabledExtensionNames = extensions.data();
+  return xrCreateInstance(&info, instance);
+}
+
+std::vector<std::string> instance_extensions() {
+  uint32_t count = 0;
+  EXPECT_EQ(xrEnumerateInstanceExtensionProperties(nullptr, 0, &count, nullptr), XR_SUCCESS);
+  std::vector props(count, make<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
+  EXPECT_EQ(xrEnumerateInstanceExtensionProperties(nullptr, count, &count, props.data()), XR_SUCCESS);
+  std::vector<std::string> names;
+  for (const auto& p : props) names.emplace_back(p.extensionName);
+  return names;
+}
+
+template <class Pfn>
+Pfn get_proc(XrInstance instance, const char* name) {
+  PFN_xrVoidFunction f = nullptr;
+  EXPECT_EQ(xrGetInstanceProcAddr(instance, name, &f), XR_SUCCESS) << name;
+  return reinterpret_cast<Pfn>(f);
+}
+
+std::vector<XrSessionState> drain_states(XrInstance instance) {
+  std::vector<XrSessionState> states;
+  auto event = make<XrEventDataBuffer>(XR_TYPE_EVENT_DATA_BUFFER);
+  while (xrPollEvent(instance, &event) == XR_SUCCESS) {
+    if (event.type == XR_TYPE_EVENT_DATA_SESSION_STATE_CHANGED) {
+      states.push_back(reinterpret_cast<const XrEventDataSessionStateChanged&>(event).state);
+    }
+    event = make<XrEventDataBuffer>(XR_TYPE_EVENT_DATA_BUFFER);
+  }
+  return states;
+}
+
+XrSpace create_space(XrSession session, XrReferenceSpaceType type, XrPosef offset = mx::kIdentityPose) {
+  auto info = make<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
+  info.referenceSpaceType = type;
+  info.poseInReferenceSpace = offset;
+  XrSpace space = XR_NULL_HANDLE;
+  EXPECT_EQ(xrCreateReferenceSpace(session, &info, &space), XR_SUCCESS);
+  return space;
+}
+
+void expect_near(const XrVector3f& a, const XrVector3f& b, float tol = 1e-5f) {
+  EXPECT_NEAR(a.x, b.x, tol);
+  EXPECT_NEAR(a.y, b.y, tol);
+  EXPECT_NEAR(a.z, b.z, tol);
+}
+void expect_near(const XrPosef& a, const XrPosef& b, float tol = 1e-5f) {
+  expect_near(a.position, b.position, tol);
+  const XrQuaternionf &p = a.orientation, &q = b.orientation;
+  const float dot = p.x * q.x + p.y * q.y + p.z * q.z + p.w * q.w;
+  EXPECT_NEAR(std::abs(dot), 1.0f, tol) << "orientations differ";
+}
+
+// What a correct headless app does from start to end; asserts along the way.
+void run_headless_app() {
+  const auto extensions = instance_extensions();
+  for (const char* wanted : {XR_MND_HEADLESS_EXTENSION_NAME, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME}) {
+    EXPECT_NE(std::find(extensions.begin(), extensions.end(), wanted), extensions.end()) << wanted;
+  }
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME}, &instance),
+            XR_SUCCESS);
+  auto properties = make<XrInstanceProperties>(XR_TYPE_INSTANCE_PROPERTIES);
+  ASSERT_EQ(xrGetInstanceProperties(instance, &properties), XR_SUCCESS);
+  EXPECT_STREQ(properties.runtimeName, "Proprio mock runtime");
+
+  auto system_info = make<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
+  system_info.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  ASSERT_EQ(xrGetSystem(instance, &system_info, &system), XR_SUCCESS);
+  EXPECT_EQ(system, 1u);
+  auto system_properties = make<XrSystemProperties>(XR_TYPE_SYSTEM_PROPERTIES);
+  ASSERT_EQ(xrGetSystemProperties(instance, system, &system_properties), XR_SUCCESS);
+
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = system;
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_IDLE, XR_SESSION_STATE_READY}));
+  auto begin_info = make<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
+  begin_info.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+  ASSERT_EQ(xrBeginSession(session, &begin_info), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance),
+            (std::vector{XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_VISIBLE, XR_SESSION_STATE_FOCUSED}));
+
+  // "Now" as the architecture says: monotonic time through the extension.
+  auto to_xr_time = get_proc<PFN_xrConvertTimespecTimeToTimeKHR>(instance, "xrConvertTimespecTimeToTimeKHR");
+  auto to_timespec = get_proc<PFN_xrConvertTimeToTimespecTimeKHR>(instance, "xrConvertTimeToTimespecTimeKHR");
+  ASSERT_TRUE(to_xr_time && to_timespec);
+  timespec now_ts{};
+  clock_gettime(CLOCK_MONOTONIC, &now_ts);
+  XrTime now = 0;
+  ASSERT_EQ(to_xr_time(instance, &now_ts, &now), XR_SUCCESS);
+  EXPECT_EQ(now, mx::xr_time_from_monotonic_ns(int64_t{now_ts.tv_sec} * 1'000'000'000 + now_ts.tv_nsec));
+  timespec back{};
+  ASSERT_EQ(to_timespec(instance, now, &back), XR_SUCCESS);
+  EXPECT_EQ(back.tv_sec, now_ts.tv_sec);
+  EXPECT_EQ(back.tv_nsec, now_ts.tv_nsec);
+
+  const XrSpace local = create_space(session, XR_REFERENCE_SPACE_TYPE_LOCAL);
+  const XrSpace view = create_space(session, XR_REFERENCE_SPACE_TYPE_VIEW);
+  const XrSpace stage = create_space(session, XR_REFERENCE_SPACE_TYPE_STAGE);
+  const XrPosef offset{{0.0f, 0.38268343f, 0.0f, 0.92387953f}, {0.1f, -0.05f, -0.2f}};  // 45 deg about +Y
+  const XrSpace view_offset = create_space(session, XR_REFERENCE_SPACE_TYPE_VIEW, offset);
+
+  struct Case {
+    XrSpace space, base;
+    XrReferenceSpaceType space_type, base_type;
+    XrPosef space_offset, base_offset;
+  };
+  const XrPosef id = mx::kIdentityPose;
+  for (const Case& c : {Case{view, local, XR_REFERENCE_SPACE_TYPE_VIEW, XR_REFERENCE_SPACE_TYPE_LOCAL, id, id},
+                        Case{local, view, XR_REFERENCE_SPACE_TYPE_LOCAL, XR_REFERENCE_SPACE_TYPE_VIEW, id, id},
+                        Case{view, stage, XR_REFERENCE_SPACE_TYPE_VIEW, XR_REFERENCE_SPACE_TYPE_STAGE, id, id},
+                        Case{view_offset, stage, XR_REFERENCE_SPACE_TYPE_VIEW, XR_REFERENCE_SPACE_TYPE_STAGE, offset, id},
+                        Case{stage, view_offset, XR_REFERENCE_SPACE_TYPE_STAGE, XR_REFERENCE_SPACE_TYPE_VIEW, id, offset}}) {
+    auto velocity = make<XrSpaceVelocity>(XR_TYPE_SPACE_VELOCITY);
+    auto location = make<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+    location.next = &velocity;
+    ASSERT_EQ(xrLocateSpace(c.space, c.base, now, &location), XR_SUCCESS);
+    const mx::Located expected = mx::locate(c.space_type, c.space_offset, c.base_type, c.base_offset, now);
+    EXPECT_EQ(location.locationFlags, XrSpaceLocationFlags{0xF});
+    EXPECT_EQ(velocity.velocityFlags, XrSpaceVelocityFlags{0x3});
+    expect_near(location.pose, expected.pose);
+    expect_near(velocity.linearVelocity, expected.linear_velocity);
+    expect_near(velocity.angularVelocity, expected.angular_velocity);
+  }
+  // STAGE is the floor 1.6 m under LOCAL.
+  auto stage_in_local = make<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+  ASSERT_EQ(xrLocateSpace(stage, local, now, &stage_in_local), XR_SUCCESS);
+  expect_near(stage_in_local.pose, XrPosef{{0, 0, 0, 1}, {0.0f, -1.6f, 0.0f}});
+
+  // A few frames, paced at 90 Hz with display times in the future.
+  for (int i = 0; i < 3; ++i) {
+    auto frame = make<XrFrameState>(XR_TYPE_FRAME_STATE);
+    ASSERT_EQ(xrWaitFrame(session, nullptr, &frame), XR_SUCCESS);
+    EXPECT_GT(frame.predictedDisplayTime, mx::xr_time_now());
+    EXPECT_EQ(frame.predictedDisplayPeriod, mx::kFramePeriodNs);
+    EXPECT_TRUE(frame.shouldRender);
+    ASSERT_EQ(xrBeginFrame(session, nullptr), XR_SUCCESS);
+    auto end = make<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+    end.displayTime = frame.predictedDisplayTime;
+    end.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+    ASSERT_EQ(xrEndFrame(session, &end), XR_SUCCESS);
+  }
+
+  ASSERT_EQ(xrRequestExitSession(session), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance),
+            (std::vector{XR_SESSION_STATE_VISIBLE, XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_STOPPING}));
+  ASSERT_EQ(xrEndSession(session), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_IDLE, XR_SESSION_STATE_EXITING}));
+  for (XrSpace s : {local, view, stage, view_offset}) EXPECT_EQ(xrDestroySpace(s), XR_SUCCESS);
+  EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+TEST_F(MockRuntime, HeadlessAppSeesTheMockMotion) { run_headless_app(); }
+
+// The velocities in mock_motion.hpp are the derivatives of its poses.
+TEST(MockMotion, VelocitiesAreDerivativesOfPoses) {
+  const XrPosef offset{{0.1f, 0.2f, -0.3f, 0.92736185f}, {0.3f, -0.1f, 0.2f}};
+  const XrPosef id = mx::kIdentityPose;
+  const std::vector<std::pair<XrReferenceSpaceType, XrPosef>> spaces{
+      {XR_REFERENCE_SPACE_TYPE_VIEW, id}, {XR_REFERENCE_SPACE_TYPE_VIEW, offset},
+      {XR_REFERENCE_SPACE_TYPE_LOCAL, id}, {XR_REFERENCE_SPACE_TYPE_STAGE, offset}};
+  const XrTime h = 1'000'000;  // 1 ms central differences
+  for (XrTime t : {XrTime{5'000'000'000}, XrTime{123'456'789'012}, XrTime{86'400'000'000'000}}) {
+    for (const auto& [a, a_off] : spaces) {
+      for (const auto& [b, b_off] : spaces) {
+        const mx::Motion m = mx::locate_motion(a, a_off, b, b_off, t);
+        const mx::Motion plus = mx::locate_motion(a, a_off, b, b_off, t + h);
+        const mx::Motion minus = mx::locate_motion(a, a_off, b, b_off, t - h);
+        const double dt = 2e-9 * static_cast<double>(h);
+        EXPECT_NEAR((plus.pose.p.x - minus.pose.p.x) / dt, m.linear_velocity.x, 1e-5);
+        EXPECT_NEAR((plus.pose.p.y - minus.pose.p.y) / dt, m.linear_velocity.y, 1e-5);
+        EXPECT_NEAR((plus.pose.p.z - minus.pose.p.z) / dt, m.linear_velocity.z, 1e-5);
+        // dR R^T over 2h: the rotation q+ q-^* is about w * 2h (small angle).
+        mx::Quat d = plus.pose.q * mx::conjugate(minus.pose.q);
+        if (d.w < 0) d = {-d.x, -d.y, -d.z, -d.w};
+        EXPECT_NEAR(2 * d.x / dt, m.angular_velocity.x, 1e-5);
+        EXPECT_NEAR(2 * d.y / dt, m.angular_velocity.y, 1e-5);
+        EXPECT_NEAR(2 * d.z / dt, m.angular_velocity.z, 1e-5);
+      }
+    }
+  }
+}
+
+TEST_F(MockRuntime, RejectsMisuse) {
+  XrInstance instance = XR_NULL_HANDLE;
+  EXPECT_EQ(create_instance({"XR_PROPRIO_no_such_extension"}, &instance), XR_ERROR_EXTENSION_NOT_PRESENT);
+  ASSERT_EQ(create_instance({}, &instance), XR_SUCCESS);  // no XR_MND_headless
+
+  auto system_info = make<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
+  system_info.formFactor = XR_FORM_FACTOR_HANDHELD_DISPLAY;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  EXPECT_EQ(xrGetSystem(instance, &system_info, &system), XR_ERROR_FORM_FACTOR_UNSUPPORTED);
+  system_info.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  ASSERT_EQ(xrGetSystem(instance, &system_info, &system), XR_SUCCESS);
+
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = system;
+  XrSession session = XR_NULL_HANDLE;
+  EXPECT_EQ(xrCreateSession(instance, &session_info, &session), XR_ERROR_GRAPHICS_DEVICE_INVALID);
+
+  PFN_xrVoidFunction f = nullptr;
+  EXPECT_EQ(xrGetInstanceProcAddr(instance, "xrConvertTimespecTimeToTimeKHR", &f), XR_ERROR_FUNCTION_UNSUPPORTED);
+  EXPECT_EQ(f, nullptr);
+  EXPECT_EQ(xrGetInstanceProcAddr(instance, "xrCreateHandTrackerEXT", &f), XR_ERROR_FUNCTION_UNSUPPORTED);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  ASSERT_EQ(xrGetSystem(instance, &system_info, &system), XR_SUCCESS);
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  auto frame = make<XrFrameState>(XR_TYPE_FRAME_STATE);
+  EXPECT_EQ(xrWaitFrame(session, nullptr, &frame), XR_ERROR_SESSION_NOT_RUNNING);
+  EXPECT_EQ(xrEndSession(session), XR_ERROR_SESSION_NOT_RUNNING);
+  auto space_info = make<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
+  space_info.referenceSpaceType = XR_REFERENCE_SPACE_TYPE_LOCAL;
+  space_info.poseInReferenceSpace = {{0, 0, 0, 2}, {0, 0, 0}};  // not a unit quaternion
+  XrSpace space = XR_NULL_HANDLE;
+  EXPECT_EQ(xrCreateReferenceSpace(session, &space_info, &space), XR_ERROR_POSE_INVALID);
+  const XrSpace local = create_space(session, XR_REFERENCE_SPACE_TYPE_LOCAL);
+  XrExtent2Df bounds{};
+  EXPECT_EQ(xrGetReferenceSpaceBoundsRect(session, XR_REFERENCE_SPACE_TYPE_STAGE, &bounds), XR_SPACE_BOUNDS_UNAVAILABLE);
+  EXPECT_EQ(xrDestroySpace(local), XR_SUCCESS);
+  EXPECT_EQ(xrDestroySpace(local), XR_ERROR_HANDLE_INVALID);
+  XrPath path = XR_NULL_PATH;
+  EXPECT_EQ(xrStringToPath(instance, "/user/hand/left", &path), XR_SUCCESS);
+  char text[XR_MAX_PATH_LENGTH];
+  uint32_t length = 0;
+  EXPECT_EQ(xrPathToString(instance, path, 2, &length, text), XR_ERROR_SIZE_INSUFFICIENT);
+  EXPECT_EQ(length, 16u);
+  EXPECT_EQ(xrPathToString(instance, path, sizeof text, &length, text), XR_SUCCESS);
+  EXPECT_STREQ(text, "/user/hand/left");
+  EXPECT_EQ(xrStringToPath(instance, "/user//hand", &path), XR_ERROR_PATH_FORMAT_INVALID);
+  // Destroying the instance takes its session and spaces with it.
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+TEST_F(MockRuntime, NativeHandTrackingOnlyWhenOffered) {
+  auto has_hand_tracking = [] {
+    const auto e = instance_extensions();
+    return std::find(e.begin(), e.end(), XR_EXT_HAND_TRACKING_EXTENSION_NAME) != e.end();
+  };
+  XrInstance instance = XR_NULL_HANDLE;
+  EXPECT_FALSE(has_hand_tracking());
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+  // The 1.0.20 loader keeps the runtime loaded, with the extension list it
+  // read then, until an instance is destroyed: flip the variable only after that.
+  ScopedEnv native("PROPRIO_MOCK_RUNTIME_HAND_TRACKING", "1");
+  ASSERT_TRUE(has_hand_tracking());
+
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME, XR_EXT_HAND_TRACKING_EXTENSION_NAME}, &instance),
+            XR_SUCCESS);
+  auto system_info = make<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
+  system_info.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  ASSERT_EQ(xrGetSystem(instance, &system_info, &system), XR_SUCCESS);
+  auto hand_properties = make<XrSystemHandTrackingPropertiesEXT>(XR_TYPE_SYSTEM_HAND_TRACKING_PROPERTIES_EXT);
+  auto properties = make<XrSystemProperties>(XR_TYPE_SYSTEM_PROPERTIES);
+  properties.next = &hand_properties;
+  ASSERT_EQ(xrGetSystemProperties(instance, system, &properties), XR_SUCCESS);
+  EXPECT_TRUE(hand_properties.supportsHandTracking);
+
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = system;
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  const XrSpace local = create_space(session, XR_REFERENCE_SPACE_TYPE_LOCAL);
+
+  auto create = get_proc<PFN_xrCreateHandTrackerEXT>(instance, "xrCreateHandTrackerEXT");
+  auto locate = get_proc<PFN_xrLocateHandJointsEXT>(instance, "xrLocateHandJointsEXT");
+  auto destroy = get_proc<PFN_xrDestroyHandTrackerEXT>(instance, "xrDestroyHandTrackerEXT");
+  ASSERT_TRUE(create && locate && destroy);
+  auto tracker_info = make<XrHandTrackerCreateInfoEXT>(XR_TYPE_HAND_TRACKER_CREATE_INFO_EXT);
+  tracker_info.hand = XR_HAND_RIGHT_EXT;
+  tracker_info.handJointSet = XR_HAND_JOINT_SET_DEFAULT_EXT;
+  XrHandTrackerEXT tracker = XR_NULL_HANDLE;
+  ASSERT_EQ(create(session, &tracker_info, &tracker), XR_SUCCESS);
+
+  auto locate_info = make<XrHandJointsLocateInfoEXT>(XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT);
+  locate_info.baseSpace = local;
+  locate_info.time = mx::xr_time_now();
+  std::vector<XrHandJointLocationEXT> joints(XR_HAND_JOINT_COUNT_EXT);
+  auto locations = make<XrHandJointLocationsEXT>(XR_TYPE_HAND_JOINT_LOCATIONS_EXT);
+  locations.jointCount = XR_HAND_JOINT_COUNT_EXT;
+  locations.jointLocations = joints.data();
+  ASSERT_EQ(locate(tracker, &locate_info, &locations), XR_SUCCESS);
+  EXPECT_TRUE(locations.isActive);
+  for (const auto& joint : joints) {
+    expect_near(joint.pose, XrPosef{{0, 0, 0, 1}, mx::kNativeJointPosition}, 0.0f);
+    EXPECT_EQ(joint.radius, mx::kNativeJointRadius);
+    EXPECT_EQ(joint.locationFlags, XrSpaceLocationFlags{0xF});
+  }
+  EXPECT_EQ(destroy(tracker), XR_SUCCESS);
+  EXPECT_EQ(xrDestroySpace(local), XR_SUCCESS);
+  EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+TEST_F(MockRuntime, ConcurrentCallsFromEightThreads) {
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  auto system_info = make<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
+  system_info.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  ASSERT_EQ(xrGetSystem(instance, &system_info, &system), XR_SUCCESS);
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = system;
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  const XrSpace local = create_space(session, XR_REFERENCE_SPACE_TYPE_LOCAL);
+
+  std::atomic<int> failures{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 8; ++t) {
+    threads.emplace_back([&, t] {
+      for (int i = 0; i < 200; ++i) {
+        auto info = make<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
+        info.referenceSpaceType = XR_REFERENCE_SPACE_TYPE_VIEW;
+        info.poseInReferenceSpace = mx::kIdentityPose;
+        XrSpace view = XR_NULL_HANDLE;
+        auto location = make<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+        XrPath path = XR_NULL_PATH;
+        const std::string name = "/thread/" + std::to_string(t);
+        if (xrCreateReferenceSpace(session, &info, &view) != XR_SUCCESS ||
+            xrLocateSpace(view, local, mx::xr_time_now(), &location) != XR_SUCCESS ||
+            xrStringToPath(instance, name.c_str(), &path) != XR_SUCCESS || xrDestroySpace(view) != XR_SUCCESS) {
+          ++failures;
+        }
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  EXPECT_EQ(failures.load(), 0);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+// The runtime's own contract, without the loader in between (the loader
+// checks some of these itself, which would hide the runtime's answers).
+TEST(MockRuntimeDirect, NegotiatesAndValidates) {
+  void* module = dlopen(PROPRIO_MOCK_RUNTIME_LIBRARY, RTLD_NOW | RTLD_LOCAL);
+  ASSERT_NE(module, nullptr) << dlerror();
+  auto negotiate = reinterpret_cast<PFN_xrNegotiateLoaderRuntimeInterface>(
+      dlsym(module, "xrNegotiateLoaderRuntimeInterface"));
+  ASSERT_NE(negotiate, nullptr);
+  EXPECT_EQ(dlsym(module, "xrGetInstanceProcAddr"), nullptr) << "only the negotiation function is exported";
+
+  XrNegotiateLoaderInfo info{XR_LOADER_INTERFACE_STRUCT_LOADER_INFO, PROPRIO_XR_LOADER_INFO_STRUCT_VERSION,
+                             sizeof(XrNegotiateLoaderInfo), 1, 1, XR_MAKE_VERSION(1, 0, 0),
+                             XR_MAKE_VERSION(1, 0x3ff, 0xfff)};
+  XrNegotiateRuntimeRequest request{XR_LOADER_INTERFACE_STRUCT_RUNTIME_REQUEST, PROPRIO_XR_RUNTIME_INFO_STRUCT_VERSION,
+                                    sizeof(XrNegotiateRuntimeRequest), 0, 0, nullptr};
+  info.minInterfaceVersion = 2;  // a loader this runtime is too old for
+  info.maxInterfaceVersion = 3;
+  EXPECT_EQ(negotiate(&info, &request), XR_ERROR_INITIALIZATION_FAILED);
+  info.minInterfaceVersion = info.maxInterfaceVersion = 1;
+  ASSERT_EQ(negotiate(&info, &request), XR_SUCCESS);
+  EXPECT_EQ(request.runtimeInterfaceVersion, 1u);
+  EXPECT_EQ(request.runtimeApiVersion, XR_CURRENT_API_VERSION);
+  const PFN_xrGetInstanceProcAddr gipa = request.getInstanceProcAddr;
+  ASSERT_NE(gipa, nullptr);
+
+  PFN_xrVoidFunction f = nullptr;
+  EXPECT_EQ(gipa(XR_NULL_HANDLE, "xrGetSystem", &f), XR_ERROR_HANDLE_INVALID);
+  ASSERT_EQ(gipa(XR_NULL_HANDLE, "xrCreateInstance", &f), XR_SUCCESS);
+  auto create = reinterpret_cast<PFN_xrCreateInstance>(f);
+  auto info_ci = make<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
+  std::snprintf(info_ci.applicationInfo.applicationName, XR_MAX_APPLICATION_NAME_SIZE, "direct");
+  info_ci.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
+  XrInstance instance = XR_NULL_HANDLE;
+  EXPECT_EQ(create(&info_ci, nullptr), XR_ERROR_VALIDATION_FAILURE);
+  ASSERT_EQ(create(&info_ci, &instance), XR_SUCCESS);
+
+  EXPECT_EQ(gipa(instance, "xrNoSuchFunction", &f), XR_ERROR_FUNCTION_UNSUPPORTED);
+  EXPECT_EQ(f, nullptr);
+  ASSERT_EQ(gipa(instance, "xrGetSystem", &f), XR_SUCCESS);
+  auto get_system = reinterpret_cast<PFN_xrGetSystem>(f);
+  auto system_info = make<XrSystemGetInfo>(XR_TYPE_SYSTEM_PROPERTIES);  // wrong type
+  system_info.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  EXPECT_EQ(get_system(instance, &system_info, &system), XR_ERROR_VALIDATION_FAILURE);
+  system_info.type = XR_TYPE_SYSTEM_GET_INFO;
+  EXPECT_EQ(get_system(instance, &system_info, nullptr), XR_ERROR_VALIDATION_FAILURE);
+  EXPECT_EQ(get_system(to_handle<XrInstance>(0xdead), &system_info, &system), XR_ERROR_HANDLE_INVALID);
+  EXPECT_EQ(get_system(instance, &system_info, &system), XR_SUCCESS);
+
+  ASSERT_EQ(gipa(instance, "xrDestroyInstance", &f), XR_SUCCESS);
+  auto destroy = reinterpret_cast<PFN_xrDestroyInstance>(f);
+  EXPECT_EQ(destroy(instance), XR_SUCCESS);
+  EXPECT_EQ(destroy(instance), XR_ERROR_HANDLE_INVALID);
+  EXPECT_EQ(get_system(instance, &system_info, &system), XR_ERROR_HANDLE_INVALID);
+  dlclose(module);
+}
+
+// Debian's core_validation layer stacked on the mock runtime: the same app
+// must raise no validation error, and deliberate misuse must raise one (so
+// the check above is not vacuous).
+class MockRuntimeUnderCoreValidation : public MockRuntime {
+ protected:
+  void SetUp() override {
+    bool found = false;
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator(PROPRIO_XR_EXPLICIT_LAYER_DIR, ec)) {
+      found |= entry.path().filename().string().starts_with("XrApiLayer_core_validation");
+    }
+    if (!found) GTEST_SKIP() << "openxr-layer-corevalidation is not installed in " PROPRIO_XR_EXPLICIT_LAYER_DIR;
+    std::filesystem::remove(report_);
+  }
+  std::string report() const {
+    std::ifstream in(report_);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  }
+
+  std::filesystem::path report_ = std::filesystem::temp_directory_path() /
+                                  ("mock_runtime_core_validation_" + std::to_string(getpid()) + ".txt");
+  ScopedEnv layer_path_{"XR_API_LAYER_PATH", PROPRIO_XR_EXPLICIT_LAYER_DIR};
+  ScopedEnv enable_{"XR_ENABLE_API_LAYERS", "XR_APILAYER_LUNARG_core_validation"};
+  ScopedEnv export_type_{"XR_CORE_VALIDATION_EXPORT_TYPE", "text"};
+  ScopedEnv file_{"XR_CORE_VALIDATION_FILE_NAME", report_.c_str()};
+};
+
+TEST_F(MockRuntimeUnderCoreValidation, HeadlessAppRaisesNoValidationError) {
+  run_headless_app();
+  const std::string text = report();
+  EXPECT_EQ(text.find("VALID_ERROR"), std::string::npos) << text;
+  EXPECT_EQ(text.find("VALID_WARNING"), std::string::npos) << text;
+  std::filesystem::remove(report_);
+}
+
+TEST_F(MockRuntimeUnderCoreValidation, MisuseIsReported) {
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  auto wrong = make<XrSystemGetInfo>(XR_TYPE_SYSTEM_PROPERTIES);  // wrong structure type
+  wrong.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  EXPECT_EQ(xrGetSystem(instance, &wrong, &system), XR_ERROR_VALIDATION_FAILURE);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+  EXPECT_NE(report().find("VALID_ERROR"), std::string::npos) << report();
+  std::filesystem::remove(report_);
+}
+
+}  // namespace

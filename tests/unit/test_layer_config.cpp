@@ -1,0 +1,79 @@
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+
+#include "proprio/openxr_layer/layer_config.hpp"
+
+using namespace proprio;
+using namespace proprio::openxr_layer;
+
+namespace {
+bool contains(const std::string& s, std::string_view n) { return s.find(n) != std::string::npos; }
+}  // namespace
+
+TEST(LayerConfig, ExampleConfigsParseToTheirDocumentedValues) {
+  auto sim = parse_layer_config(example_layer_config(), "example.toml");
+  ASSERT_TRUE(sim.ok()) << sim.error().message;
+  EXPECT_EQ(sim->runtime_hand_tracking, RuntimeHandTracking::automatic);
+  EXPECT_EQ(sim->max_prediction_ns, 50 * kNsPerMillisecond);
+  ASSERT_EQ(sim->sources.size(), 1u);
+  EXPECT_EQ(sim->sources[0].type, SourceType::sim);
+  EXPECT_EQ(sim->sources[0].space, ReferenceSpace::view);
+  EXPECT_EQ(sim->sources[0].hands.size(), 2u);
+
+  auto replay = parse_layer_config(example_layer_config("/data/s1.prec"), "example.toml");
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  EXPECT_EQ(replay->sources[0].type, SourceType::replay);
+  EXPECT_EQ(replay->sources[0].path, "/data/s1.prec");
+  EXPECT_TRUE(replay->sources[0].loop);
+}
+
+TEST(LayerConfig, OffsetsAreMetresAndDegrees) {
+  auto c = parse_layer_config(
+      "[[source]]\ntype = \"sim\"\nspace = \"stage\"\noffset_position_m = [0.1, 1.2, -0.3]\n"
+      "offset_rotation_deg = [0, 90, 0]\nhands = [\"right\"]\n",
+      "t.toml");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  const auto& s = c->sources[0];
+  EXPECT_EQ(s.space, ReferenceSpace::stage);
+  EXPECT_LT((s.T_space_source.p - Vec3(0.1, 1.2, -0.3)).norm(), 1e-12);
+  EXPECT_NEAR(so3_log(s.T_space_source.q).y(), M_PI / 2, 1e-9);
+  ASSERT_EQ(s.hands.size(), 1u);
+  EXPECT_EQ(s.hands[0], Handedness::right);
+}
+
+TEST(LayerConfig, ErrorsNameTheFileTheSourceAndTheChoices) {
+  auto bad_type = parse_layer_config("[[source]]\ntype = \"vist\"\n", "layer.toml");
+  ASSERT_FALSE(bad_type.ok());
+  EXPECT_TRUE(contains(bad_type.error().message, "layer.toml")) << bad_type.error().message;
+  EXPECT_TRUE(contains(bad_type.error().message, "sim, replay")) << bad_type.error().message;
+
+  auto no_path = parse_layer_config("[[source]]\ntype = \"replay\"\n", "layer.toml");
+  ASSERT_FALSE(no_path.ok());
+  EXPECT_TRUE(contains(no_path.error().message, "path")) << no_path.error().message;
+
+  auto bad_hand = parse_layer_config("[[source]]\ntype = \"sim\"\nhands = [\"middle\"]\n", "layer.toml");
+  ASSERT_FALSE(bad_hand.ok());
+  EXPECT_TRUE(contains(bad_hand.error().message, "#1")) << bad_hand.error().message;
+
+  auto bad_mode = parse_layer_config("[layer]\nruntime_hand_tracking = \"maybe\"\n", "layer.toml");
+  ASSERT_FALSE(bad_mode.ok());
+  EXPECT_TRUE(contains(bad_mode.error().message, "auto, override, passthrough")) << bad_mode.error().message;
+
+  auto bad_offset = parse_layer_config("[[source]]\ntype = \"sim\"\noffset_position_m = [1, 2]\n", "layer.toml");
+  ASSERT_FALSE(bad_offset.ok());
+  EXPECT_TRUE(contains(bad_offset.error().message, "3 numbers")) << bad_offset.error().message;
+
+  EXPECT_FALSE(load_layer_config("/nonexistent/layer.toml").ok());
+}
+
+TEST(LayerConfig, DefaultPathFollowsEnvironment) {
+  ::setenv("PROPRIO_LAYER_CONFIG", "/tmp/x/layer.toml", 1);
+  EXPECT_EQ(default_layer_config_path(), "/tmp/x/layer.toml");
+  ::unsetenv("PROPRIO_LAYER_CONFIG");
+  ::setenv("XDG_CONFIG_HOME", "/tmp/xdg", 1);
+  EXPECT_EQ(default_layer_config_path(), "/tmp/xdg/proprio/layer.toml");
+  ::unsetenv("XDG_CONFIG_HOME");
+  ::setenv("HOME", "/home/u", 1);
+  EXPECT_EQ(default_layer_config_path(), "/home/u/.config/proprio/layer.toml");
+}

@@ -3,10 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
-#include <filesystem>
-#include <fstream>
 
 #include "fake_next.hpp"
+#include "layer_test_util.hpp"
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/core/xr_interop.hpp"
@@ -15,55 +14,18 @@ using namespace proprio;
 
 namespace {
 
-namespace fs = std::filesystem;
-
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    path = fs::temp_directory_path() / ("proprio_layer_" + std::to_string(::getpid()) + "_" +
-                                        std::to_string(reinterpret_cast<std::uintptr_t>(this)));
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-};
-
-const HandModel& model() {
-  static HandModel m(*HandShape::from_measurements(0.19, 0.10));
-  return m;
-}
-
-// The poses the replay source will serve: each hand still, in a known pose.
-HandPose recorded_pose(Handedness hand, TimeNs t) {
-  HandAngles a{};
-  a[index_of(HandDof::index_mcp_flexion)] = 0.4;
-  a[index_of(HandDof::thumb_cmc_abduction)] = 0.3;
-  const Pose T_source_wrist{so3_exp(Vec3(0.2, 0.1, -0.3)), Vec3(hand == Handedness::left ? -0.1 : 0.1, -0.2, -0.4)};
-  return model().forward(hand, a, T_source_wrist, t);
-}
-
-fs::path write_recording(const fs::path& dir, DurationNs span) {
-  const fs::path file = dir / "still.prec";
-  auto w = RecordingWriter::create(file);
-  EXPECT_TRUE(w.ok());
-  auto s = w->add_stream(StreamKind::hand_pose, "hand/both/tracked");
-  for (TimeNs t = 0; t <= span; t += 10 * kNsPerMillisecond) {
-    EXPECT_TRUE(w->write(*s, recorded_pose(Handedness::left, t)).ok());
-    EXPECT_TRUE(w->write(*s, recorded_pose(Handedness::right, t)).ok());
-  }
-  EXPECT_TRUE(w->close().ok());
-  return file;
-}
+using layer_test::recorded_pose;
+using layer_test::TempDir;
+using layer_test::write_still_recording;
 
 class LayerDispatch : public ::testing::Test {
  protected:
   void use_config(const std::string& text) {
-    const fs::path cfg = dir_.path / "layer.toml";
-    std::ofstream(cfg) << text;
-    ::setenv("PROPRIO_LAYER_CONFIG", cfg.c_str(), 1);
+    ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);
   }
   void use_replay(DurationNs span = 10 * kNsPerSecond, bool loop = true, const std::string& extra = "") {
     use_config("[layer]\n" + extra + "\n[[source]]\ntype = \"replay\"\nspace = \"local\"\npath = \"" +
-               write_recording(dir_.path, span).string() + "\"\nloop = " + (loop ? "true" : "false") + "\n");
+               write_still_recording(dir_.path, span).string() + "\"\nloop = " + (loop ? "true" : "false") + "\n");
   }
   void SetUp() override {
     fake_next::state().runtime_hand_tracking = false;

@@ -9,6 +9,8 @@
 //  - xrLocateHandJointsEXT takes a shared lock and never allocates.
 #include "proprio/openxr_layer/xr_ext.hpp"  // first: it switches on XR_USE_TIMESPEC
 
+#include <pthread.h>
+
 #include <array>
 #include <cstring>
 #include <ctime>
@@ -76,9 +78,34 @@ struct Tracker {
   bool unobstructed_requested = true;     // XR_EXT_hand_tracking_data_source
 };
 
+// A reader-writer lock that lets a waiting writer in. glibc's default (what
+// std::shared_mutex uses) prefers readers, so eight threads locating in a
+// loop starve xrDestroyHandTrackerEXT forever: the hang Ultraleap's layer once
+// showed in the conformance suite. Not recursive: never re-lock on one thread.
+class WriterFairSharedMutex {
+ public:
+  WriterFairSharedMutex() {
+    pthread_rwlockattr_t attr;
+    pthread_rwlockattr_init(&attr);
+    pthread_rwlockattr_setkind_np(&attr, PTHREAD_RWLOCK_PREFER_WRITER_NONRECURSIVE_NP);
+    pthread_rwlock_init(&lock_, &attr);
+    pthread_rwlockattr_destroy(&attr);
+  }
+  ~WriterFairSharedMutex() { pthread_rwlock_destroy(&lock_); }
+  WriterFairSharedMutex(const WriterFairSharedMutex&) = delete;
+  WriterFairSharedMutex& operator=(const WriterFairSharedMutex&) = delete;
+  void lock() { pthread_rwlock_wrlock(&lock_); }
+  void unlock() { pthread_rwlock_unlock(&lock_); }
+  void lock_shared() { pthread_rwlock_rdlock(&lock_); }
+  void unlock_shared() { pthread_rwlock_unlock(&lock_); }
+
+ private:
+  pthread_rwlock_t lock_;
+};
+
 // All layer state. Lookups on the hot path take the shared lock only.
 struct Registry {
-  std::shared_mutex mutex;
+  WriterFairSharedMutex mutex;
   std::unordered_map<XrInstance, std::unique_ptr<Instance>> instances;
   std::unordered_map<XrSession, Instance*> sessions;
   std::unordered_map<XrHandTrackerEXT, std::unique_ptr<Tracker>> trackers;
@@ -130,8 +157,8 @@ void start_sources(Instance& inst) {
   const auto path = default_layer_config_path();
   auto cfg = load_layer_config(path);
   if (!cfg) {
-    logger().error("Proprio hand-tracking layer: {}. Hand tracking is off (supportsHandTracking = false). "
-                   "Write a config with 'proprio layer init-config'.",
+    logger().error("Proprio hand-tracking layer: {}. Proprio serves no hands (a runtime's own hand tracking, "
+                   "if any, passes through). Write a config with 'proprio layer init-config'.",
                    cfg.error().message);
     return;
   }
@@ -583,6 +610,14 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
 
     bool timespec = app_convert_timespec || inst->serving;
     XrResult r = create(build(inst->serving, timespec && !app_convert_timespec));
+    if (r == XR_ERROR_EXTENSION_NOT_PRESENT && inst->hand_tracking && !inst->serving) {
+      // The runtime may track hands without the two companion extensions.
+      std::vector<const char*> names;
+      for (const char* n : build(false, false)) {
+        if (!is_ours(n) || std::string_view(n) == XR_EXT_HAND_TRACKING_EXTENSION_NAME) names.push_back(n);
+      }
+      r = create(names);
+    }
     if (r == XR_ERROR_EXTENSION_NOT_PRESENT && inst->hand_tracking && !inst->serving) {
       // Pass-through was wanted but the runtime has no hand tracking: serve
       // ourselves (with no source, the app sees supportsHandTracking = false).

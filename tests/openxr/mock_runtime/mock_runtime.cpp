@@ -95,7 +95,8 @@ XrResult guarded(const char* function, Body&& body, const char* what = nullptr) 
   }
   if (log_calls()) {
     const char* name = result_name(result);
-    std::fprintf(stderr, "[proprio-mock-xr] %s%s%s%s -> ", function, what ? "(" : "", what ? what : "", what ? ")" : "");
+    std::fprintf(stderr, "[proprio-mock-xr] %s%s%s%s -> ", function, what ? "(" : "", what ? what : "",
+                 what ? ")" : "");
     if (name != nullptr) {
       std::fprintf(stderr, "%s\n", name);
     } else {
@@ -953,7 +954,8 @@ namespace {
 XrResult negotiate(const XrNegotiateLoaderInfo* info, XrNegotiateRuntimeRequest* request) {
   if (info == nullptr || request == nullptr) return XR_ERROR_INITIALIZATION_FAILED;
   if (info->structType != XR_LOADER_INTERFACE_STRUCT_LOADER_INFO ||
-      info->structVersion != PROPRIO_XR_LOADER_INFO_STRUCT_VERSION || info->structSize != sizeof(XrNegotiateLoaderInfo)) {
+      info->structVersion != PROPRIO_XR_LOADER_INFO_STRUCT_VERSION ||
+      info->structSize != sizeof(XrNegotiateLoaderInfo)) {
     return XR_ERROR_INITIALIZATION_FAILED;
   }
   if (request->structType != XR_LOADER_INTERFACE_STRUCT_RUNTIME_REQUEST ||

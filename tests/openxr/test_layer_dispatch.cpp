@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <new>
 
 #include "fake_next.hpp"
 #include "layer_test_util.hpp"
@@ -11,6 +12,21 @@
 #include "proprio/core/xr_interop.hpp"
 
 using namespace proprio;
+
+// Counts this thread's heap allocations, to hold the layer to "no allocation
+// in xrLocateHandJointsEXT".
+namespace {
+thread_local std::size_t g_allocations = 0;
+}
+// GCC cannot see that these replace the global pair and warns on free().
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+void* operator new(std::size_t n) {
+  ++g_allocations;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace {
 
@@ -173,6 +189,33 @@ TEST_F(LayerDispatch, LocatesRecordedJointsInTheBaseSpace) {
     }
     EXPECT_EQ(chain_.get<PFN_xrDestroyHandTrackerEXT>(instance_, "xrDestroyHandTrackerEXT")(t), XR_SUCCESS);
   }
+}
+
+TEST_F(LayerDispatch, LocatingAllocatesNothing) {
+  use_replay();
+  ASSERT_EQ(create(), XR_SUCCESS);
+  XrHandTrackerEXT t;
+  ASSERT_EQ(create_tracker(XR_HAND_RIGHT_EXT, &t), XR_SUCCESS);
+  std::array<XrHandJointVelocityEXT, kHandJointCount> vel{};
+  auto velocities = xr_struct<XrHandJointVelocitiesEXT>(XR_TYPE_HAND_JOINT_VELOCITIES_EXT);
+  velocities.jointCount = kHandJointCount;
+  velocities.jointVelocities = vel.data();
+  locations_.next = &velocities;
+  auto locate_fn = chain_.get<PFN_xrLocateHandJointsEXT>(instance_, "xrLocateHandJointsEXT");
+  auto info = xr_struct<XrHandJointsLocateInfoEXT>(XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT);
+  info.baseSpace = reinterpret_cast<XrSpace>(0x4004);
+  const XrTime now = fake_next::xr_now();
+  const std::size_t counted = g_allocations;
+  auto probe = std::make_unique<int>(1);  // the counter sees allocations at all
+  ASSERT_EQ(g_allocations, counted + 1);
+  const std::size_t before = g_allocations;
+  for (int i = 0; i < 200; ++i) {
+    info.time = now + i * 1'000'000;  // interpolated, then predicted, then stale: every path
+    ASSERT_EQ(locate_fn(t, &info, &locations_), XR_SUCCESS);
+  }
+  info.time = 0;
+  EXPECT_EQ(locate_fn(t, &info, &locations_), XR_ERROR_TIME_INVALID);
+  EXPECT_EQ(g_allocations - before, 0u);
 }
 
 TEST_F(LayerDispatch, ValidationErrorsFollowTheSpec) {

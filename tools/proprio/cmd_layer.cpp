@@ -577,7 +577,7 @@ void add_layer_commands(CLI::App& app, int& exit_code) {
   cmd = layer->add_subcommand(
       "init-config",
       "Write a complete, commented layer configuration to start from: the simulated hand bound to VIEW space, or "
-      "with --replay a recording played in a loop in LOCAL space.\n"
+      "with --replay a recording played in a loop in STAGE space.\n"
       "Default destination: $PROPRIO_LAYER_CONFIG, else $XDG_CONFIG_HOME/proprio/layer.toml (~/.config/proprio/"
       "layer.toml), which is where the layer reads it.");
   cmd->add_option("--replay", init->replay, "Recording (.prec) to serve instead of the simulated hand");

@@ -233,7 +233,9 @@ rate_hz = 90
 # A recorded session (proprio sim-hand, or a tracker's recording), played in a loop.
 type = "replay"
 hands = ["left", "right"]
-space = "local"
+# sim-hand recordings are in the simulation's world frame: floor at y = 0,
+# the head 1.6 m above it, so STAGE (floor-level origin) puts them right.
+space = "stage"
 offset_position_m = [0.0, 0.0, 0.0]
 offset_rotation_deg = [0.0, 0.0, 0.0]
 path = ")" + recording_path + R"("

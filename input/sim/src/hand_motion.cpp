@@ -121,13 +121,17 @@ HandMotionGenerator::HandMotionGenerator(HandModel model, HandMotionOptions opti
   relaxed_ = degrees({10, 10, 10, 10, 15, 5, 20, 10, 15, 0, 20, 10, 15, -3, 20, 10, 15, -8, 20, 10});
   const HandAngles pinch_start =
       degrees({30, 25, 20, 15, 40, 0, 40, 27, 30, 0, 45, 30, 30, -3, 45, 30, 30, -8, 45, 30});
-  pinch_ = solve_pinch(model_, Finger::index, pinch_start);
-  HandAngles tripod_start = pinch_start;
-  tripod_start[first_dof_of(Finger::middle)] = deg_to_rad(45);
-  tripod_ = solve_pinch(model_, Finger::index, tripod_start);
-  tripod_[first_dof_of(Finger::middle)] = tripod_[first_dof_of(Finger::index)] + deg_to_rad(5);
-  tripod_[first_dof_of(Finger::middle) + 2] = tripod_[first_dof_of(Finger::index) + 2];
-  tripod_[first_dof_of(Finger::middle) + 3] = tripod_[first_dof_of(Finger::index) + 3];
+  pinch_ = pinch_start;
+  tripod_ = pinch_start;
+  if (options_.protocol == MotionProtocol::pinch_grasp) {  // the solve is the costly part of construction
+    pinch_ = solve_pinch(model_, Finger::index, pinch_start);
+    HandAngles tripod_start = pinch_start;
+    tripod_start[first_dof_of(Finger::middle)] = deg_to_rad(45);
+    tripod_ = solve_pinch(model_, Finger::index, tripod_start);
+    tripod_[first_dof_of(Finger::middle)] = tripod_[first_dof_of(Finger::index)] + deg_to_rad(5);
+    tripod_[first_dof_of(Finger::middle) + 2] = tripod_[first_dof_of(Finger::index) + 2];
+    tripod_[first_dof_of(Finger::middle) + 3] = tripod_[first_dof_of(Finger::index) + 3];
+  }
   power_ = degrees({35, 30, 40, 45, 70, 0, 85, 55, 72, 0, 88, 58, 75, -3, 88, 58, 78, -8, 85, 55});
   Rng head_rng(mix_seed(options.seed, 1));
   for (auto& ph : head_phase_) ph = head_rng.uniform(0.0, 2.0 * kPi);

@@ -65,7 +65,8 @@ class HandMotionGenerator {
 
   const HandModel& model() const noexcept { return model_; }
   const HandMotionOptions& options() const noexcept { return options_; }
-  // The pinch posture solved for this hand (thumb and index pads touching).
+  // The pinch posture solved for this hand (thumb and index pads touching);
+  // solved only for the pinch-grasp protocol.
   const HandAngles& pinch_angles() const noexcept { return pinch_; }
 
  private:

@@ -10,25 +10,14 @@
 
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/recording.hpp"
+#include "support/temp_dir.hpp"
 
 namespace layer_test {
 
 namespace fs = std::filesystem;
 using namespace proprio;
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("proprio_layer_" + std::to_string(::getpid()) + "_" + std::to_string(reinterpret_cast<std::uintptr_t>(this)));
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  fs::path write(const std::string& name, const std::string& text) const {
-    std::ofstream(path / name) << text;
-    return path / name;
-  }
-};
+using proprio::testing_support::TempDir;
 
 inline const HandModel& model() {
   static HandModel m(*HandShape::from_measurements(0.19, 0.10));

@@ -41,7 +41,7 @@ class LayerDispatch : public ::testing::Test {
   }
   void use_replay(DurationNs span = 10 * kNsPerSecond, bool loop = true, const std::string& extra = "") {
     use_config("[layer]\n" + extra + "\n[[source]]\ntype = \"replay\"\nspace = \"local\"\npath = \"" +
-               write_still_recording(dir_.path, span).string() + "\"\nloop = " + (loop ? "true" : "false") + "\n");
+               write_still_recording(dir_.path(), span).string() + "\"\nloop = " + (loop ? "true" : "false") + "\n");
   }
   void SetUp() override {
     fake_next::state().runtime_hand_tracking = false;
@@ -156,7 +156,7 @@ TEST_F(LayerDispatch, BrokenOrMissingConfigMeansNoHandTrackingNotACrash) {
 }
 
 TEST_F(LayerDispatch, MissingConfigFileMeansNoHandTracking) {
-  ::setenv("PROPRIO_LAYER_CONFIG", (dir_.path / "absent.toml").c_str(), 1);
+  ::setenv("PROPRIO_LAYER_CONFIG", (dir_.path() / "absent.toml").c_str(), 1);
   ASSERT_EQ(create(), XR_SUCCESS);
   EXPECT_FALSE(supports_hand_tracking());
 }

@@ -122,13 +122,13 @@ class LayerThroughLoader : public ::testing::TestWithParam<bool> {
     ::setenv("XR_ENABLE_API_LAYERS", enable.c_str(), 1);
     ::unsetenv("PROPRIO_MOCK_RUNTIME_HAND_TRACKING");
     // Pretend home, so no user-installed layer or config interferes.
-    ::setenv("XDG_CONFIG_HOME", (dir_.path / "config").c_str(), 1);
-    ::setenv("XDG_DATA_HOME", (dir_.path / "data").c_str(), 1);
+    ::setenv("XDG_CONFIG_HOME", (dir_.path() / "config").c_str(), 1);
+    ::setenv("XDG_DATA_HOME", (dir_.path() / "data").c_str(), 1);
   }
   // A still recorded hand pair bound to VIEW with an offset: what the app sees
   // is exactly T_local_view(t) * offset * recorded joint.
   void use_still_hands_in_view() {
-    const auto rec = layer_test::write_still_recording(dir_.path, 10 * kNsPerSecond);
+    const auto rec = layer_test::write_still_recording(dir_.path(), 10 * kNsPerSecond);
     use_config("[[source]]\ntype = \"replay\"\nspace = \"view\"\noffset_position_m = [0.01, -0.02, 0.03]\n"
                "offset_rotation_deg = [0, 10, 0]\npath = \"" + rec.string() + "\"\n");
   }
@@ -159,7 +159,7 @@ TEST_P(LayerThroughLoader, EnumeratesItsExtensions) {
 }
 
 TEST_P(LayerThroughLoader, NoConfigMeansNoHandTrackingButAWorkingApp) {
-  ::setenv("PROPRIO_LAYER_CONFIG", (dir_.path / "absent.toml").c_str(), 1);
+  ::setenv("PROPRIO_LAYER_CONFIG", (dir_.path() / "absent.toml").c_str(), 1);
   App app;
   XR_OK(app.create_instance(all_extensions()));
   EXPECT_FALSE(app.supports_hand_tracking());
@@ -294,7 +294,7 @@ TEST_P(LayerThroughLoader, OverrideOrPassThroughTheRuntimesOwnHandTracking) {
   for (const bool pass_through : {false, true}) {
     use_still_hands_in_view();
     if (pass_through) {
-      const auto rec = dir_.path / "still.prec";
+      const auto rec = dir_.path() / "still.prec";
       use_config("[layer]\nruntime_hand_tracking = \"passthrough\"\n[[source]]\ntype = \"replay\"\npath = \"" +
                  rec.string() + "\"\n");
     }
@@ -364,15 +364,15 @@ INSTANTIATE_TEST_SUITE_P(Stack, LayerThroughLoader, ::testing::Values(false, tru
 TEST(ImplicitLayer, LoadsWithoutBeingEnabledAndHonoursItsDisableVariable) {
   TempDir dir;
   // The loader reads user layer manifests from $XDG_DATA_HOME, not $XDG_CONFIG_HOME.
-  const auto implicit_dir = dir.path / "data" / "openxr" / "1" / "api_layers" / "implicit.d";
+  const auto implicit_dir = dir.path() / "data" / "openxr" / "1" / "api_layers" / "implicit.d";
   std::filesystem::create_directories(implicit_dir);
   std::filesystem::copy_file(std::string(PROPRIO_LAYER_MANIFEST_DIR) + "/XrApiLayer_proprio_hand_tracking.json",
                              implicit_dir / "XrApiLayer_proprio_hand_tracking.json");
   ::setenv("XR_RUNTIME_JSON", PROPRIO_MOCK_RUNTIME_JSON, 1);
   ::unsetenv("XR_API_LAYER_PATH");
   ::unsetenv("XR_ENABLE_API_LAYERS");
-  ::setenv("XDG_CONFIG_HOME", (dir.path / "config").c_str(), 1);
-  ::setenv("XDG_DATA_HOME", (dir.path / "data").c_str(), 1);
+  ::setenv("XDG_CONFIG_HOME", (dir.path() / "config").c_str(), 1);
+  ::setenv("XDG_DATA_HOME", (dir.path() / "data").c_str(), 1);
   ::setenv("PROPRIO_LAYER_CONFIG", dir.write("layer.toml", "[[source]]\ntype = \"sim\"\n").c_str(), 1);
   {
     App app;

@@ -213,6 +213,13 @@ Instance* find_instance_locked(XrInstance handle) {
   return it == r.instances.end() ? nullptr : it->second.get();
 }
 
+// The Instance outlives the call: only xrDestroyInstance removes it, and an
+// app must not call into an instance while destroying it.
+Instance* find_instance(XrInstance handle) {
+  std::shared_lock lock(registry().mutex);
+  return find_instance_locked(handle);
+}
+
 // ---- hooked functions ------------------------------------------------------
 
 XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance, const char* name,
@@ -221,11 +228,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
 XRAPI_ATTR XrResult XRAPI_CALL layer_get_system_properties(XrInstance instance, XrSystemId system,
                                                            XrSystemProperties* properties) {
   return guarded("xrGetSystemProperties", [&] {
-    Instance* inst;
-    {
-      std::shared_lock lock(registry().mutex);
-      inst = find_instance_locked(instance);
-    }
+    Instance* inst = find_instance(instance);
     if (!inst) return XR_ERROR_HANDLE_INVALID;
     if (!properties) return XR_ERROR_VALIDATION_FAILURE;
     // The runtime did not enable hand tracking for us, so take our struct out
@@ -246,11 +249,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_system_properties(XrInstance instance, 
 XRAPI_ATTR XrResult XRAPI_CALL layer_create_session(XrInstance instance, const XrSessionCreateInfo* info,
                                                     XrSession* session) {
   return guarded("xrCreateSession", [&] {
-    Instance* inst;
-    {
-      std::shared_lock lock(registry().mutex);
-      inst = find_instance_locked(instance);
-    }
+    Instance* inst = find_instance(instance);
     if (!inst) return XR_ERROR_HANDLE_INVALID;
     const XrResult r = inst->next.create_session(instance, info, session);
     if (XR_SUCCEEDED(r)) {

@@ -113,3 +113,10 @@ TEST(Config, LoadFileReportsMissingFileAndReadsRealOne) {
   EXPECT_EQ(*c->get_int("seed"), 7);
   std::filesystem::remove(path);
 }
+
+TEST(Config, WhereGivesTheKeysPositionOrTheFile) {
+  const Config c = parse_ok("a = 1\n[rig]\nfx = 640\n");
+  EXPECT_EQ(c.where("rig.fx"), "test.toml:3:6");
+  EXPECT_EQ(c.where("absent"), "test.toml");
+  EXPECT_EQ(c.table("rig")->where("fx"), "test.toml:3:6");
+}

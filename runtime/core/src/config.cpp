@@ -21,7 +21,7 @@ std::string full_key(const Config::Impl& impl, std::string_view key) {
   return impl.prefix.empty() ? std::string(key) : impl.prefix + "." + std::string(key);
 }
 
-std::string where(const Config::Impl& impl, const toml::node* node) {
+std::string where_in(const Config::Impl& impl, const toml::node* node) {
   std::ostringstream s;
   s << impl.source;
   if (node && node->source().begin.line > 0) s << ':' << node->source().begin.line << ':' << node->source().begin.column;
@@ -49,7 +49,7 @@ Error missing(const Config::Impl& impl, std::string_view key) {
 }
 
 Error wrong_type(const Config::Impl& impl, std::string_view key, const toml::node& n, const std::string& expected) {
-  return make_error(Errc::invalid_argument, where(impl, &n) + ": '" + full_key(impl, key) + "' must be " +
+  return make_error(Errc::invalid_argument, where_in(impl, &n) + ": '" + full_key(impl, key) + "' must be " +
                                                 expected + ", but it is " + type_name(n));
 }
 
@@ -67,7 +67,7 @@ std::string to_text(T v) {
 template <typename T>
 Result<T> check_range(const Config::Impl& impl, std::string_view key, const toml::node& n, T v, T min, T max) {
   if (v < min || v > max) {
-    return make_error(Errc::out_of_range, where(impl, &n) + ": '" + full_key(impl, key) + "' = " + to_text(v) +
+    return make_error(Errc::out_of_range, where_in(impl, &n) + ": '" + full_key(impl, key) + "' = " + to_text(v) +
                                               " is outside the allowed range [" + to_text(min) + ", " +
                                               to_text(max) + "]");
   }
@@ -125,7 +125,7 @@ Result<double> Config::get_double(std::string_view key) const {
   if (auto v = n->value_exact<double>()) {
     if (!std::isfinite(*v)) {
       return make_error(Errc::invalid_argument,
-                        where(*impl_, n) + ": '" + full_key(*impl_, key) + "' must be a finite number");
+                        where_in(*impl_, n) + ": '" + full_key(*impl_, key) + "' must be a finite number");
     }
     return *v;
   }
@@ -153,7 +153,7 @@ Result<std::vector<double>> Config::get_doubles(std::string_view key) const {
     } else if (auto v = e.value_exact<double>(); v && std::isfinite(*v)) {
       out.push_back(*v);
     } else {
-      return make_error(Errc::invalid_argument, where(*impl_, &e) + ": element " + std::to_string(i) + " of '" +
+      return make_error(Errc::invalid_argument, where_in(*impl_, &e) + ": element " + std::to_string(i) + " of '" +
                                                     full_key(*impl_, key) + "' must be a finite number, but it is " +
                                                     type_name(e));
     }
@@ -171,7 +171,7 @@ Result<std::vector<std::string>> Config::get_strings(std::string_view key) const
     const auto& e = *arr->get(i);
     auto v = e.value_exact<std::string>();
     if (!v) {
-      return make_error(Errc::invalid_argument, where(*impl_, &e) + ": element " + std::to_string(i) + " of '" +
+      return make_error(Errc::invalid_argument, where_in(*impl_, &e) + ": element " + std::to_string(i) + " of '" +
                                                     full_key(*impl_, key) + "' must be a string, but it is " +
                                                     type_name(e));
     }
@@ -240,5 +240,7 @@ std::vector<std::string> Config::keys() const {
 }
 
 const std::string& Config::source_name() const noexcept { return impl_->source; }
+
+std::string Config::where(std::string_view key) const { return where_in(*impl_, find(*impl_, key)); }
 
 }  // namespace proprio

@@ -1,6 +1,5 @@
 #include "proprio/core/glove_description.hpp"
 
-#include <toml++/toml.h>
 
 #include <algorithm>
 #include <array>
@@ -420,35 +419,6 @@ constexpr const char* kSegmentChoices =
     "dorsum (or wrist), or a joint that starts a bone: thumb_metacarpal, thumb_proximal, thumb_distal, "
     "index_metacarpal, index_proximal, index_intermediate, index_distal, and the same for middle, ring and little";
 
-// Config reports type and range errors with file:line itself; for the checks
-// only this file knows about (a hue name, a segment name, a key that does not
-// belong) we look the key up in a parallel toml++ tree, which has the same
-// source positions. ASSUMPTION: Config has no public "where is this key" call
-// yet; if one is added, this can go.
-class Locator {
- public:
-  Locator(std::string_view text, std::string source) : source_(std::move(source)) {
-    try {
-      root_ = toml::parse(text, source_);
-    } catch (const toml::parse_error&) {
-      // Config::parse has already accepted this text; a failure here only
-      // costs line numbers.
-    }
-  }
-  // "file:line:col" of a dotted key ("marker[3].hue"), or just the file.
-  std::string where(const std::string& key) const {
-    const toml::node* n = root_.at_path(key).node();
-    std::ostringstream s;
-    s << source_;
-    if (n && n->source().begin.line > 0) s << ':' << n->source().begin.line << ':' << n->source().begin.column;
-    return s.str();
-  }
-
- private:
-  std::string source_;
-  toml::table root_;
-};
-
 std::string join(const std::vector<std::string_view>& items) {
   std::string out;
   for (std::size_t i = 0; i < items.size(); ++i) out += (i ? ", " : "") + std::string(items[i]);
@@ -457,7 +427,7 @@ std::string join(const std::vector<std::string_view>& items) {
 
 class Parser {
  public:
-  Parser(const Config& cfg, const Locator& loc) : cfg_(cfg), loc_(loc) {}
+  explicit Parser(const Config& cfg) : cfg_(cfg) {}
 
   Result<GloveDescription> run() {
     GloveDescription g;
@@ -480,7 +450,7 @@ class Parser {
       for (const auto& other : g.imus) {
         if (other.name == m->name) {
           return make_error(Errc::invalid_argument,
-                            loc_.where("imu[" + std::to_string(i) + "]") + ": two IMUs are named '" + m->name +
+                            cfg_.where("imu[" + std::to_string(i) + "]") + ": two IMUs are named '" + m->name +
                                 "'; IMU names identify sensor streams, so give each a distinct 'name'");
         }
       }
@@ -510,7 +480,7 @@ class Parser {
   }
 
   Error error_at(const std::string& key, Errc code, const std::string& what) const {
-    return make_error(code, loc_.where(key) + ": '" + key + "' " + what);
+    return make_error(code, cfg_.where(key) + ": '" + key + "' " + what);
   }
 
   // A key that is not part of the format is an error: a typo ("along_fraction"
@@ -530,7 +500,7 @@ class Parser {
   Result<double> required_in(const Config& t, const std::string& prefix, std::string_view key, double min,
                              double max, const char* what) const {
     if (!t.contains(key)) {
-      return make_error(Errc::not_found, loc_.where(prefix) + ": " + label(prefix) + " has no '" + std::string(key) +
+      return make_error(Errc::not_found, cfg_.where(prefix) + ": " + label(prefix) + " has no '" + std::string(key) +
                                              "' (" + what + "); add it, see docs/vist-glove.md");
     }
     return t.get_double_or(key, 0.0, min, max);
@@ -625,7 +595,7 @@ class Parser {
 
     if (!t->contains("left_camera_position_in_head_m")) {
       return make_error(Errc::not_found,
-                        loc_.where(P) + ": [rig] has no 'left_camera_position_in_head_m' (the left camera's "
+                        cfg_.where(P) + ": [rig] has no 'left_camera_position_in_head_m' (the left camera's "
                                         "position in the OpenXR head frame, metres, e.g. [-0.0315, 0.0, -0.08]); "
                                         "add it");
     }
@@ -639,7 +609,7 @@ class Parser {
     const bool has_rot = t->contains("left_camera_rotation_in_head_deg");
     if (has_tilt == has_rot) {
       return make_error(Errc::invalid_argument,
-                        loc_.where(P) + ": [rig] needs exactly one of 'left_camera_tilt_down_deg' (degrees the "
+                        cfg_.where(P) + ": [rig] needs exactly one of 'left_camera_tilt_down_deg' (degrees the "
                                         "camera is pitched down from looking straight ahead) or "
                                         "'left_camera_rotation_in_head_deg' (rotation vector of the camera in the "
                                         "head frame, degrees)");
@@ -662,7 +632,7 @@ class Parser {
     auto s = t.get_string("segment");
     if (!s) {
       if (s.error().code == Errc::not_found) {
-        return make_error(Errc::not_found, loc_.where(prefix) + ": " + label(prefix) +
+        return make_error(Errc::not_found, cfg_.where(prefix) + ": " + label(prefix) +
                                                " has no 'segment'; name the bone it sits on: " + kSegmentChoices);
       }
       return s.error();
@@ -722,7 +692,7 @@ class Parser {
     auto hue = t.get_string("hue");
     if (!hue) {
       if (hue.error().code == Errc::not_found) {
-        return make_error(Errc::not_found, loc_.where(P) + ": " + label(P) + " has no 'hue'; use one of " +
+        return make_error(Errc::not_found, cfg_.where(P) + ": " + label(P) + " has no 'hue'; use one of " +
                                                join({kHueNames.begin(), kHueNames.end()}));
       }
       return hue.error();
@@ -755,7 +725,6 @@ class Parser {
   }
 
   const Config& cfg_;
-  const Locator& loc_;
 };
 
 std::string mm_text(double metres) {
@@ -773,8 +742,7 @@ std::string deg_vec_text(const Quat& q) {
 Result<GloveDescription> GloveDescription::parse(std::string_view toml_text, const std::string& source_name) {
   auto cfg = Config::parse(toml_text, source_name);
   if (!cfg) return cfg.error();
-  const Locator loc(toml_text, source_name);
-  return Parser(*cfg, loc).run();
+  return Parser(*cfg).run();
 }
 
 Result<GloveDescription> GloveDescription::load(const std::filesystem::path& path) {

@@ -45,6 +45,9 @@ class Config {
   std::vector<std::string> keys() const;
 
   const std::string& source_name() const noexcept;
+  // "file:line:col" of a key (dotted, relative to this table), or just the
+  // file name when the key is absent: for errors only the caller can detect.
+  std::string where(std::string_view key) const;
 
   struct Impl;
 

@@ -266,6 +266,21 @@ void release_tracker(Tracker& t) {
   t.source_space = XR_NULL_HANDLE;
 }
 
+// Child handles go with their parent (OpenXR handle lifetime rules). Caller
+// holds the registry exclusively.
+template <typename Pred>
+void erase_trackers_if(Pred belongs) {
+  auto& trackers = registry().trackers;
+  for (auto t = trackers.begin(); t != trackers.end();) {
+    if (belongs(*t->second)) {
+      release_tracker(*t->second);
+      t = trackers.erase(t);
+    } else {
+      ++t;
+    }
+  }
+}
+
 XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_session(XrSession session) {
   return guarded("xrDestroySession", [&] {
     auto& r = registry();
@@ -273,15 +288,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_session(XrSession session) {
     auto it = r.sessions.find(session);
     if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
     Instance* inst = it->second;
-    // Child handles go with their parent (OpenXR handle lifetime rules).
-    for (auto t = r.trackers.begin(); t != r.trackers.end();) {
-      if (t->second->session == session) {
-        release_tracker(*t->second);
-        t = r.trackers.erase(t);
-      } else {
-        ++t;
-      }
-    }
+    erase_trackers_if([&](const Tracker& t) { return t.session == session; });
     r.sessions.erase(it);
     return inst->next.destroy_session(session);
   });
@@ -295,14 +302,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_instance(XrInstance instance) {
       std::unique_lock lock(r.mutex);
       auto it = r.instances.find(instance);
       if (it == r.instances.end()) return XR_ERROR_HANDLE_INVALID;
-      for (auto t = r.trackers.begin(); t != r.trackers.end();) {
-        if (t->second->instance == it->second.get()) {
-          release_tracker(*t->second);
-          t = r.trackers.erase(t);
-        } else {
-          ++t;
-        }
-      }
+      erase_trackers_if([&](const Tracker& t) { return t.instance == it->second.get(); });
       for (auto s = r.sessions.begin(); s != r.sessions.end();) {
         s = s->second == it->second.get() ? r.sessions.erase(s) : std::next(s);
       }

@@ -12,6 +12,15 @@ using namespace proprio;
 
 namespace {
 
+// Poses sampled up front so only the stereo simulation is timed: 20 s of free
+// motion at the rig's 30 Hz.
+std::vector<sim::HandMotionFrame> free_motion_at_30hz(const HandShape& shape) {
+  sim::HandMotionGenerator gen(HandModel(shape), sim::HandMotionOptions{});
+  std::vector<sim::HandMotionFrame> motion;
+  for (int k = 0; k < 600; ++k) motion.push_back(gen.sample(k * 33'333'333LL));
+  return motion;
+}
+
 // Arg 0: occlusion off, 1: on.
 void BM_StereoSimulateFrame(benchmark::State& state) {
   const HandShape shape = *sim::sim_subject(3)->shape();
@@ -22,11 +31,7 @@ void BM_StereoSimulateFrame(benchmark::State& state) {
     state.SkipWithError(simulator.error().message.c_str());
     return;
   }
-  // Poses sampled up front so only the stereo simulation is timed: 20 s of
-  // free motion at the rig's 30 Hz.
-  sim::HandMotionGenerator gen(HandModel(shape), sim::HandMotionOptions{});
-  std::vector<sim::HandMotionFrame> motion;
-  for (int k = 0; k < 600; ++k) motion.push_back(gen.sample(k * 33'333'333LL));
+  const std::vector<sim::HandMotionFrame> motion = free_motion_at_30hz(shape);
   std::size_t i = 0;
   std::size_t seen = 0;
   for (auto _ : state) {
@@ -50,9 +55,7 @@ void BM_StereoSimulateFrameWithTruth(benchmark::State& state) {
     state.SkipWithError(simulator.error().message.c_str());
     return;
   }
-  sim::HandMotionGenerator gen(HandModel(shape), sim::HandMotionOptions{});
-  std::vector<sim::HandMotionFrame> motion;
-  for (int k = 0; k < 600; ++k) motion.push_back(gen.sample(k * 33'333'333LL));
+  const std::vector<sim::HandMotionFrame> motion = free_motion_at_30hz(shape);
   std::size_t i = 0;
   sim::StereoGroundTruth truth;
   for (auto _ : state) {

@@ -414,12 +414,14 @@ XrResult xrPollEvent(XrInstance instance, XrEventDataBuffer* event_data) {
   return XR_SUCCESS;
 }
 
+bool instance_exists(XrInstance instance) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  return find(reg.instances, id_of(instance)) != nullptr;
+}
+
 XrResult xrResultToString(XrInstance instance, XrResult value, char buffer[XR_MAX_RESULT_STRING_SIZE]) {
-  {
-    Registry& reg = registry();
-    std::lock_guard lock(reg.mutex);
-    if (find(reg.instances, id_of(instance)) == nullptr) return XR_ERROR_HANDLE_INVALID;
-  }
+  if (!instance_exists(instance)) return XR_ERROR_HANDLE_INVALID;
   if (buffer == nullptr) return XR_ERROR_VALIDATION_FAILURE;
   if (const char* name = result_name(value)) {
     copy_string(buffer, XR_MAX_RESULT_STRING_SIZE, name);
@@ -431,11 +433,7 @@ XrResult xrResultToString(XrInstance instance, XrResult value, char buffer[XR_MA
 }
 
 XrResult xrStructureTypeToString(XrInstance instance, XrStructureType value, char buffer[XR_MAX_STRUCTURE_NAME_SIZE]) {
-  {
-    Registry& reg = registry();
-    std::lock_guard lock(reg.mutex);
-    if (find(reg.instances, id_of(instance)) == nullptr) return XR_ERROR_HANDLE_INVALID;
-  }
+  if (!instance_exists(instance)) return XR_ERROR_HANDLE_INVALID;
   if (buffer == nullptr) return XR_ERROR_VALIDATION_FAILURE;
   if (const char* name = structure_type_name(value)) {
     copy_string(buffer, XR_MAX_STRUCTURE_NAME_SIZE, name);
@@ -489,11 +487,7 @@ XrResult xrGetSystemProperties(XrInstance instance, XrSystemId system_id, XrSyst
 XrResult xrEnumerateEnvironmentBlendModes(XrInstance instance, XrSystemId system_id,
                                           XrViewConfigurationType view_configuration, uint32_t capacity,
                                           uint32_t* count, XrEnvironmentBlendMode* modes) {
-  {
-    Registry& reg = registry();
-    std::lock_guard lock(reg.mutex);
-    if (find(reg.instances, id_of(instance)) == nullptr) return XR_ERROR_HANDLE_INVALID;
-  }
+  if (!instance_exists(instance)) return XR_ERROR_HANDLE_INVALID;
   if (system_id != kSystemId) return XR_ERROR_SYSTEM_INVALID;
   if (view_configuration != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) {
     return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;

@@ -6,6 +6,12 @@ namespace proprio::cli {
 // Each registers its subcommand; the callback runs it and sets the exit code.
 void add_sim_hand_command(CLI::App& app, int& exit_code);
 void add_replay_command(CLI::App& app, int& exit_code);
+// `track vist` and `bench vist`.
+void add_vist_commands(CLI::App& app, int& exit_code);
+// `calibrate stereo`.
+void add_calibrate_command(CLI::App& app, int& exit_code);
+// `glove emulate|monitor|list`: the USB HID IMU glove.
+void add_glove_command(CLI::App& app, int& exit_code);
 // `layer install|uninstall|status|init-config` and `xr-probe`: built when the
 // OpenXR layer is part of the build (PROPRIO_HAVE_OPENXR_LAYER).
 void add_layer_commands(CLI::App& app, int& exit_code);

@@ -1,5 +1,223 @@
-// placeholder: filled in by the issue-4 work
+// proprio bench vist: the VIST evaluation protocol on simulated subjects.
+// proprio track vist: the VIST tracker on a recorded session.
+#include <algorithm>
+#include <cstdio>
+#include <future>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
 #include "commands.hpp"
+#include "progress.hpp"
+#include "proprio/core/log.hpp"
+#include "proprio/sim/subjects.hpp"
+#include "proprio/vist_eval/evaluation.hpp"
+
 namespace proprio::cli {
-void add_vist_commands(CLI::App&, int&) {}
+namespace {
+
+using vist_eval::Ablation;
+using vist_eval::Challenge;
+
+struct BenchVistArgs {
+  int subjects = 5;
+  int first_subject = 7;  // with --subjects 1: which one
+  double minutes = 5.0;
+  double challenge_minutes = 1.0;
+  std::uint64_t seed = 1;
+  std::string mode = "detections";
+  std::string suite = "all";
+  std::string glove;
+  int threads = 0;
+  bool json = false;
+};
+
+nlohmann::json to_json(const vist_eval::ErrorSummary& e) {
+  return {{"samples", e.samples}, {"mean_mm", e.mean_mm}, {"median_mm", e.median_mm}, {"p95_mm", e.p95_mm},
+          {"pck20", e.pck20},     {"pck35", e.pck35},     {"auc_0_50mm", e.auc50}};
+}
+
+nlohmann::json to_json(const vist_eval::Aggregate& a) {
+  nlohmann::json j = {
+      {"name", a.name},
+      {"sessions", a.sessions},
+      {"keypoints", to_json(a.keypoints)},
+      {"all_joints", to_json(a.all_joints)},
+      {"keypoint_mean_mm",
+       {{"dorsum", a.keypoint_mean_mm[0]},
+        {"thumb_tip", a.keypoint_mean_mm[1]},
+        {"index_tip", a.keypoint_mean_mm[2]},
+        {"middle_tip", a.keypoint_mean_mm[3]}}},
+      {"nees_mean", a.nees_mean},
+      {"nees_fraction_in_95", a.nees_in_95},
+      {"realtime_factor", a.realtime_factor},
+      {"tracker_realtime_factor", a.tracker_realtime_factor},
+      {"acquisitions_failed", a.acquisitions_failed},
+  };
+  if (a.scale_error_max >= 0.0) {
+    j["calibration"] = {{"scale_error_max", a.scale_error_max}, {"mounting_error_max_deg", a.mounting_error_max_deg}};
+  }
+  if (!a.recovery_s.empty()) {
+    j["recovery_s"] = a.recovery_s;
+    j["recovery_max_s"] = *std::max_element(a.recovery_s.begin(), a.recovery_s.end());
+  }
+  return j;
+}
+
+struct Case {
+  std::string name;
+  Challenge challenge;
+  Ablation ablation;
+  double minutes;
+};
+
+int run_bench_vist(const BenchVistArgs& a) {
+  auto mode = vist_eval::parse_frame_mode(a.mode);
+  GloveDescription glove = GloveDescription::vist_default();
+  if (!a.glove.empty()) {
+    auto g = GloveDescription::load(a.glove);
+    if (!g) return logger().error("{}", g.error().message), 2;
+    glove = std::move(*g);
+  }
+  std::vector<Case> cases;
+  const bool all = a.suite == "all";
+  if (all || a.suite == "free") cases.push_back({"free_motion", Challenge::none, Ablation::full, a.minutes});
+  if (all || a.suite == "challenges") {
+    for (auto c : {Challenge::occlude_half, Challenge::out_of_view, Challenge::distractors, Challenge::dropped_frames}) {
+      cases.push_back({std::string(vist_eval::to_string(c)), c, Ablation::full, a.challenge_minutes});
+    }
+  }
+  if (all || a.suite == "ablations") {
+    for (auto b : {Ablation::imu_only, Ablation::vision_only, Ablation::no_imu_priors}) {
+      cases.push_back({"ablation_" + std::string(vist_eval::to_string(b)), Challenge::none, b, a.challenge_minutes});
+    }
+  }
+  struct Job {
+    std::size_t case_index;
+    vist_eval::SessionSpec spec;
+  };
+  std::vector<Job> jobs;
+  double total_s = 0.0;
+  for (std::size_t c = 0; c < cases.size(); ++c) {
+    for (int s = 0; s < a.subjects; ++s) {
+      vist_eval::SessionSpec spec;
+      // Subjects spread over the pool (hand lengths 17-20.5 cm).
+      spec.subject = a.subjects == 1 ? a.first_subject : (s * (sim::kSimSubjectCount - 1)) / std::max(1, a.subjects - 1);
+      spec.duration_s = cases[c].minutes * 60.0;
+      spec.seed = a.seed;
+      spec.challenge = cases[c].challenge;
+      spec.ablation = cases[c].ablation;
+      spec.mode = *mode;
+      jobs.push_back({c, spec});
+      total_s += spec.duration_s;
+    }
+  }
+  const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  logger().info("bench vist: {} case(s) x {} subject(s), {:.0f} simulated seconds on {} thread(s), seed {}, {} mode",
+                cases.size(), a.subjects, total_s, threads, a.seed, a.mode);
+  std::vector<std::vector<vist_eval::SessionResult>> results(cases.size());
+  ProgressBar progress("bench vist", total_s, "s simulated");
+  double done_s = 0.0;
+  std::size_t next = 0;
+  int failures = 0;
+  std::vector<std::future<Result<vist_eval::SessionResult>>> running;
+  std::vector<std::size_t> running_job;
+  auto launch = [&] {
+    const Job& j = jobs[next];
+    running.push_back(std::async(std::launch::async, [&glove, spec = j.spec] { return vist_eval::run_session(glove, spec); }));
+    running_job.push_back(next);
+    ++next;
+  };
+  while (next < jobs.size() || !running.empty()) {
+    while (next < jobs.size() && static_cast<int>(running.size()) < threads) launch();
+    // Collect the oldest job (jobs are similar in length).
+    auto r = running.front().get();
+    const Job& j = jobs[running_job.front()];
+    running.erase(running.begin());
+    running_job.erase(running_job.begin());
+    if (!r) {
+      logger().error("{} subject {}: {}", cases[j.case_index].name, j.spec.subject, r.error().message);
+      ++failures;
+      continue;
+    }
+    done_s += j.spec.duration_s;
+    progress.update(done_s);
+    logger().debug("{} subject {}: keypoint mean {:.2f} mm; {}", cases[j.case_index].name, j.spec.subject,
+                   r->keypoints.mean_mm, r->stats.describe());
+    results[j.case_index].push_back(std::move(*r));
+  }
+  progress.finish();
+
+  nlohmann::json out = {{"machine_threads", std::thread::hardware_concurrency()},
+                        {"seed", a.seed},
+                        {"mode", a.mode},
+                        {"subjects", a.subjects},
+                        {"glove", glove.name},
+                        {"keypoints", {"dorsum (palm joint)", "thumb_tip", "index_tip", "middle_tip"}},
+                        {"warmup_s_not_scored", vist_eval::SessionSpec{}.warmup_s},
+                        {"camera_latency_s", vist_eval::SessionSpec{}.camera_latency_s}};
+  std::printf("%s", a.json ? "" : "\nVIST on simulated subjects (errors after a 5 s warm-up; keypoints: dorsum, thumb/index/middle tips)\n");
+  if (!a.json) {
+    std::printf("%-26s %8s %8s %8s %8s %8s %9s %8s %8s\n", "case", "kp mean", "kp p95", "PCK@20", "PCK@35", "AUC50",
+                "all26 mm", "NEES", "x RT");
+  }
+  for (std::size_t c = 0; c < cases.size(); ++c) {
+    const auto agg = vist_eval::aggregate(cases[c].name, results[c]);
+    out["cases"].push_back(to_json(agg));
+    if (!a.json) {
+      std::printf("%-26s %8.2f %8.2f %7.1f%% %7.1f%% %8.3f %9.2f %8.2f %8.1f\n", cases[c].name.c_str(),
+                  agg.keypoints.mean_mm, agg.keypoints.p95_mm, 100 * agg.keypoints.pck20, 100 * agg.keypoints.pck35,
+                  agg.keypoints.auc50, agg.all_joints.mean_mm, agg.nees_mean, agg.realtime_factor);
+      if (agg.scale_error_max >= 0.0 && c == 0) {
+        std::printf("%-26s scale error max %.2f %%, IMU mounting error max %.2f deg (at 30 s)\n", "",
+                    100 * agg.scale_error_max, agg.mounting_error_max_deg);
+      }
+      if (!agg.recovery_s.empty()) {
+        std::printf("%-26s recovery after re-entry: max %.2f s over %zu events\n", "",
+                    *std::max_element(agg.recovery_s.begin(), agg.recovery_s.end()), agg.recovery_s.size());
+      }
+    }
+  }
+  if (a.json) std::printf("%s\n", out.dump(2).c_str());
+  return failures == 0 ? 0 : 1;
+}
+
+}  // namespace
+
+void add_vist_commands(CLI::App& app, int& exit_code) {
+  auto* bench = app.add_subcommand("bench", "Benchmarks that measure accuracy on simulated data");
+  bench->require_subcommand(1);
+  auto args = std::make_shared<BenchVistArgs>();
+  auto* vist = bench->add_subcommand(
+      "vist",
+      "Run the VIST evaluation protocol on simulated subjects and print the accuracy:\n"
+      "free motion (a random target pose every 3 s), challenges (half the markers occluded 2 s,\n"
+      "hand out of view 3 s, distractor blobs, 10% dropped frames) and ablations (IMU only,\n"
+      "vision only, correspondence search without IMU priors).");
+  vist->add_option("--subjects", args->subjects, "simulated subjects per case, spread over hand sizes")
+      ->check(CLI::Range(1, sim::kSimSubjectCount))
+      ->capture_default_str();
+  vist->add_option("--subject", args->first_subject, "with --subjects 1: the subject id (0-14)")
+      ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
+      ->capture_default_str();
+  vist->add_option("--minutes", args->minutes, "minutes of free motion per subject")
+      ->check(CLI::Range(0.1, 120.0))
+      ->capture_default_str();
+  vist->add_option("--challenge-minutes", args->challenge_minutes, "minutes per subject of each challenge and ablation")
+      ->check(CLI::Range(0.1, 120.0))
+      ->capture_default_str();
+  vist->add_option("--seed", args->seed, "seed of the simulated sessions")->capture_default_str();
+  vist->add_option("--mode", args->mode, "detections: simulated blob centroids; images: rendered images + OpenCV detector")
+      ->check(CLI::IsMember({"detections", "images"}))
+      ->capture_default_str();
+  vist->add_option("--suite", args->suite, "which cases to run")
+      ->check(CLI::IsMember({"all", "free", "challenges", "ablations"}))
+      ->capture_default_str();
+  vist->add_option("--glove", args->glove, "glove description TOML (default: the thesis glove)");
+  vist->add_option("--threads", args->threads, "sessions run in parallel (0: one per core)")->capture_default_str();
+  vist->add_flag("--json", args->json, "print the metrics as JSON");
+  vist->callback([args, &exit_code] { exit_code = run_bench_vist(*args); });
+}
+
 }  // namespace proprio::cli

@@ -45,14 +45,17 @@ std::optional<MotionProtocol> parse_motion_protocol(std::string_view s) noexcept
 }
 
 std::string HandMotionOptions::describe() const {
-  char buf[320];
+  char buf[480];
   std::snprintf(buf, sizeof buf,
                 "protocol=%s hand=%s seed=%llu interval=%.2fs transition=%.2fs limit_fraction=%.2f head_sway=%s "
-                "wrist_box=[%.2f,%.2f,%.2f]..[%.2f,%.2f,%.2f]m max_tilt=%.1fdeg",
+                "wrist_box=[%.2f,%.2f,%.2f]..[%.2f,%.2f,%.2f]m max_tilt=%.1fdeg natural_coupling=%s "
+                "(dip_dev=%.1fdeg thumb_ip_dev=%.1fdeg enslaved_dev=%.1fdeg)",
                 std::string(to_string(protocol)).c_str(), std::string(proprio::to_string(hand)).c_str(),
                 static_cast<unsigned long long>(seed), target_interval_s, transition_s, limit_fraction,
                 head_sway ? "on" : "off", wrist_min_in_head.x(), wrist_min_in_head.y(), wrist_min_in_head.z(),
-                wrist_max_in_head.x(), wrist_max_in_head.y(), wrist_max_in_head.z(), rad_to_deg(wrist_max_tilt_rad));
+                wrist_max_in_head.x(), wrist_max_in_head.y(), wrist_max_in_head.z(), rad_to_deg(wrist_max_tilt_rad),
+                natural_coupling ? "on" : "off", rad_to_deg(dip_deviation_rad), rad_to_deg(thumb_ip_deviation_rad),
+                rad_to_deg(enslaved_deviation_rad));
   return buf;
 }
 
@@ -145,6 +148,20 @@ HandMotionGenerator::Keyframe HandMotionGenerator::make_keyframe(std::size_t k) 
     for (std::size_t i = 0; i < kHandDofCount; ++i) {
       const double span = lim.max_rad[i] - lim.min_rad[i];
       a[i] = rng_.uniform(lim.min_rad[i] + shrink * span, lim.max_rad[i] - shrink * span);
+    }
+    if (options_.natural_coupling) {
+      auto dof = [&](Finger f, std::size_t i) -> double& { return a[first_dof_of(f) + i]; };
+      for (Finger f : {Finger::ring, Finger::little}) {
+        const Finger neighbour = f == Finger::ring ? Finger::middle : Finger::ring;
+        for (std::size_t i : {std::size_t{0}, std::size_t{2}}) {  // MCP and PIP flexion
+          dof(f, i) = dof(neighbour, i) + options_.enslaved_deviation_rad * rng_.normal();
+        }
+      }
+      for (Finger f : {Finger::index, Finger::middle, Finger::ring, Finger::little}) {
+        dof(f, 3) = (2.0 / 3.0) * dof(f, 2) + options_.dip_deviation_rad * rng_.normal();
+      }
+      dof(Finger::thumb, 3) = 0.5 * dof(Finger::thumb, 2) + options_.thumb_ip_deviation_rad * rng_.normal();
+      a = lim.clamp(a);
     }
     return a;
   };

@@ -33,6 +33,16 @@ struct HandMotionOptions {
   double target_interval_s = 3.0;  // a new keyframe this often
   double transition_s = 1.0;       // minimum-jerk move time; the rest of the interval holds
   double limit_fraction = 0.85;    // random angles stay within this central fraction of each range
+  // Free motion draws targets a hand can make: a finger's DIP cannot flex
+  // much on its own, and the ring and little fingers are "enslaved" to their
+  // neighbours. Rijpkema & Girard 1991 give DIP = 2/3 PIP; Häger-Ross &
+  // Schieber 2000 measured that ring and little fingers move with their
+  // neighbours. The deviation sigmas below are assumptions. false: every DOF
+  // is drawn independently over its range (no real hand can do all of these).
+  bool natural_coupling = true;
+  double dip_deviation_rad = 0.14;        // ~8°: DIP around 2/3 PIP
+  double thumb_ip_deviation_rad = 0.2;    // ~11°: thumb IP around 1/2 MCP
+  double enslaved_deviation_rad = 0.26;   // ~15°: ring around middle, little around ring (flexions)
   // Head (viewpoint) at rest: 1.6 m up, looking along -Z. The head sways a
   // little around it; wrist targets are placed relative to it.
   Pose T_world_head_rest{Quat::Identity(), Vec3(0.0, 1.6, 0.0)};

@@ -1,0 +1,418 @@
+#include "proprio/vist_eval/evaluation.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+
+#include "proprio/core/random.hpp"
+#include "proprio/sim/imu_sim.hpp"
+#include "proprio/sim/stereo_sim.hpp"
+#include "proprio/sim/subjects.hpp"
+
+namespace proprio::vist_eval {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+constexpr std::array<HandJoint, 4> kKeypoints = {HandJoint::palm, HandJoint::thumb_tip, HandJoint::index_tip,
+                                                  HandJoint::middle_tip};
+// Two-sided 95 % interval of chi-square with 6 degrees of freedom.
+constexpr double kChi2_6_lo = 1.2373, kChi2_6_hi = 14.4494;
+
+// A static blob in the room behind the hand, seen by both cameras.
+struct Distractor {
+  Vec3 p_in_world;
+  MarkerHue hue;
+  double diameter_m;
+};
+
+std::vector<Distractor> make_distractors(int count, const Pose& T_world_head, std::uint64_t seed) {
+  Rng rng(mix_seed(seed, 0xd157));
+  std::vector<Distractor> out;
+  for (int i = 0; i < count; ++i) {
+    // In front of the head (-Z), 0.8-2.5 m away, spread over the view.
+    const double z = -rng.uniform(0.8, 2.5);
+    const Vec3 p_in_head(rng.uniform(-0.9, 0.9) * -z, rng.uniform(-0.6, 0.3) * -z, z);
+    out.push_back({T_world_head * p_in_head, static_cast<MarkerHue>(rng.below(4)), rng.uniform(0.01, 0.04)});
+  }
+  return out;
+}
+
+void add_distractors(const std::vector<Distractor>& ds, const sim::StereoMarkerSimulator& sim,
+                     const Pose& T_world_leftcam, sim::StereoFrame& frame) {
+  const Pose T_leftcam_world = T_world_leftcam.inverse();
+  const auto& cam = sim.rig().camera;
+  for (const auto& d : ds) {
+    const Vec3 p = T_leftcam_world * d.p_in_world;
+    if (p.z() < 0.1) continue;
+    for (std::size_t c = 0; c < 2; ++c) {
+      const Eigen::Vector2d uv = sim.project(p, c);
+      if (uv.x() < 0 || uv.y() < 0 || uv.x() > cam.width_px - 1 || uv.y() > cam.height_px - 1) continue;
+      Marker m;
+      m.hue = sim::marker_hue_code(d.hue);
+      m.u_px = static_cast<float>(uv.x());
+      m.v_px = static_cast<float>(uv.y());
+      m.area_px2 = static_cast<float>(std::numbers::pi * 0.25 * d.diameter_m * d.diameter_m * cam.fx_px * cam.fy_px /
+                                      (p.z() * p.z()));
+      frame.cameras[c].markers.push_back(m);
+    }
+  }
+}
+
+// Per-axis least-squares scale taking the nominal glove's IMU-to-marker
+// levers to the user's: the truth the filter's scale estimates are compared with.
+struct ScaleTruth {
+  Vec3 scale = Vec3::Ones();
+  Vec3 leverage = Vec3::Zero();  // RMS nominal lever per axis (m): how well the markers span the axis
+};
+std::vector<ScaleTruth> true_scales(const vist::VistModel& model, const GloveDescription& glove,
+                                    const HandShape& shape, Handedness hand) {
+  const auto imus = glove.place_imus(shape, hand);
+  const auto markers = glove.place_markers(shape, hand);
+  std::vector<ScaleTruth> out(model.segments.size());
+  std::vector<Vec3> num(model.segments.size(), Vec3::Zero()), den(model.segments.size(), Vec3::Zero());
+  std::vector<int> count(model.segments.size(), 0);
+  for (const auto& fm : model.markers) {
+    const auto& seg = model.segments[fm.segment];
+    const Vec3 t = markers[fm.glove_index].p_in_segment - imus[seg.imu_sensor_id].T_segment_imu.p;
+    const Vec3& n = fm.lever_in_segment;
+    num[fm.segment] += t.cwiseProduct(n);
+    den[fm.segment] += n.cwiseProduct(n);
+    ++count[fm.segment];
+  }
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    for (int a = 0; a < 3; ++a) {
+      out[k].scale[a] = den[k][a] > 0.0 ? num[k][a] / den[k][a] : 1.0;
+      out[k].leverage[a] = count[k] > 0 ? std::sqrt(den[k][a] / count[k]) : 0.0;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string_view to_string(Challenge c) noexcept {
+  switch (c) {
+    case Challenge::none: return "none";
+    case Challenge::occlude_half: return "occlude_half";
+    case Challenge::out_of_view: return "out_of_view";
+    case Challenge::distractors: return "distractors";
+    case Challenge::dropped_frames: return "dropped_frames";
+  }
+  return "?";
+}
+std::string_view to_string(Ablation a) noexcept {
+  switch (a) {
+    case Ablation::full: return "full";
+    case Ablation::imu_only: return "imu_only";
+    case Ablation::vision_only: return "vision_only";
+    case Ablation::no_imu_priors: return "no_imu_priors";
+  }
+  return "?";
+}
+std::string_view to_string(FrameMode m) noexcept { return m == FrameMode::images ? "images" : "detections"; }
+std::optional<FrameMode> parse_frame_mode(std::string_view s) noexcept {
+  if (s == "detections") return FrameMode::detections;
+  if (s == "images") return FrameMode::images;
+  return std::nullopt;
+}
+
+ErrorSummary summarize(std::vector<float>& e) {
+  ErrorSummary s;
+  s.samples = e.size();
+  if (e.empty()) return s;
+  std::sort(e.begin(), e.end());
+  double sum = 0.0;
+  for (float x : e) sum += x;
+  s.mean_mm = sum / static_cast<double>(e.size());
+  auto quantile = [&](double q) { return static_cast<double>(e[static_cast<std::size_t>(q * (e.size() - 1))]); };
+  s.median_mm = quantile(0.5);
+  s.p95_mm = quantile(0.95);
+  auto pck = [&](double t) {
+    return static_cast<double>(std::upper_bound(e.begin(), e.end(), static_cast<float>(t)) - e.begin()) /
+           static_cast<double>(e.size());
+  };
+  s.pck20 = pck(20.0);
+  s.pck35 = pck(35.0);
+  // AUC of PCK over [0, 50] mm by the trapezoid rule on a 0.5 mm grid.
+  double auc = 0.0;
+  double prev = pck(0.0);
+  for (int i = 1; i <= 100; ++i) {
+    const double cur = pck(0.5 * i);
+    auc += 0.5 * (prev + cur) * 0.5;
+    prev = cur;
+  }
+  s.auc50 = auc / 50.0;
+  return s;
+}
+
+Result<SessionResult> run_session(const GloveDescription& glove, const SessionSpec& spec,
+                                  const vist::VistTrackerOptions& base_options) {
+  if (spec.mode == FrameMode::images) {
+    return Error(Errc::unsupported, "VIST evaluation: image mode is not available in this build");
+  }
+  auto subject = sim::sim_subject(spec.subject);
+  if (!subject) return subject.error();
+  auto shape = subject->shape();
+  if (!shape) return shape.error();
+
+  SessionResult res;
+  res.spec = spec;
+  res.hand_length_m = subject->hand_length_m;
+  res.hand_width_m = subject->hand_width_m;
+
+  const std::uint64_t seed = mix_seed(spec.seed, static_cast<std::uint64_t>(spec.subject));
+  sim::HandMotionOptions mo;
+  mo.protocol = spec.protocol;
+  mo.hand = spec.hand;
+  mo.seed = mix_seed(seed, 1);
+  sim::HandMotionGenerator motion(HandModel(*shape), mo);
+  sim::HandMotionGenerator truth_motion(HandModel(*shape), mo);  // same motion, sampled separately
+
+  auto imu = sim::ImuSimulator::create(motion, glove.place_imus(*shape, spec.hand), sim::ImuNoiseOptions{},
+                                       mix_seed(seed, 2));
+  if (!imu) return imu.error();
+  sim::StereoSimOptions so;
+  so.seed = mix_seed(seed, 3);
+  so.pixel_noise_px = spec.pixel_noise_px;
+  so.drop_probability = spec.challenge == Challenge::dropped_frames ? 0.1 : 0.0;
+  auto stereo = sim::StereoMarkerSimulator::create(glove, *shape, so);
+  if (!stereo) return stereo.error();
+  // The stereo simulator places markers for a right hand and mirrors them for a left pose.
+
+  vist::VistTrackerOptions to = base_options;
+  to.hand = spec.hand;
+  switch (spec.ablation) {
+    case Ablation::full: break;
+    case Ablation::imu_only: to.use_vision = false; break;
+    case Ablation::vision_only: to.use_imu = false; break;
+    case Ablation::no_imu_priors: to.correspondence.use_priors = false; break;
+  }
+  auto tracker = vist::VistTracker::create(glove, to);
+  if (!tracker) return tracker.error();
+  const vist::VistModel& model = tracker->model();
+  const auto scale_truth = true_scales(model, glove, *shape, spec.hand);
+  std::vector<Quat> q_imu_segment_truth;
+  for (const auto& seg : model.segments) {
+    q_imu_segment_truth.push_back(imu->mountings()[seg.imu_sensor_id].T_segment_imu.q.conjugate());
+  }
+
+  const auto distractors = spec.challenge == Challenge::distractors
+                               ? make_distractors(spec.distractor_count, mo.T_world_head_rest, mix_seed(seed, 4))
+                               : std::vector<Distractor>{};
+  Rng occlusion_rng(mix_seed(seed, 5));
+  std::vector<bool> occluded_half(stereo->markers().size(), false);
+  {
+    std::vector<std::size_t> idx(occluded_half.size());
+    std::iota(idx.begin(), idx.end(), 0);
+    occlusion_rng.shuffle(idx.begin(), idx.end());
+    for (std::size_t i = 0; i < idx.size() / 2; ++i) occluded_half[idx[i]] = true;
+  }
+  auto hidden = [&](double t_s, std::size_t marker) {
+    switch (spec.challenge) {
+      case Challenge::occlude_half: return std::fmod(t_s, 10.0) >= 8.0 && occluded_half[marker];
+      case Challenge::out_of_view: return t_s >= 9.0 && std::fmod(t_s - 9.0, 12.0) < 3.0;
+      default: return false;
+    }
+  };
+  // Out-of-view events: returns at 12, 24, 36, ... s.
+  std::vector<double> returns_s;
+  if (spec.challenge == Challenge::out_of_view) {
+    for (double t = 12.0; t < spec.duration_s - 1.0; t += 12.0) returns_s.push_back(t);
+  }
+  std::vector<double> recovered(returns_s.size(), -1.0);
+
+  const double rate = stereo->rig().rate_hz;
+  const TimeNs latency_ns = static_cast<TimeNs>(spec.camera_latency_s * 1e9);
+  struct Arrival {
+    TimeNs arrival, capture;
+    sim::StereoFrame frame;
+    Pose T_world_leftcam;
+  };
+  std::vector<Arrival> in_flight;
+  std::int64_t next_frame = 0;
+  const TimeNs end_ns = static_cast<TimeNs>(spec.duration_s * 1e9);
+  const TimeNs warmup_ns = static_cast<TimeNs>(spec.warmup_s * 1e9);
+  const TimeNs calib_ns = static_cast<TimeNs>(spec.calibration_check_s * 1e9);
+  bool calibration_done = false;
+  double tracker_s = 0.0;
+  double nees_sum = 0.0;
+  std::size_t nees_in = 0;
+  std::vector<float> kp_err, joint_err;
+  std::array<double, 4> kp_sum{};
+  std::size_t kp_n = 0;
+  vist::TimedImuSample ts;
+  sim::StereoGroundTruth gt;
+  const auto t0 = Clock::now();
+
+  while (imu->next_nominal_time_ns() <= end_ns) {
+    const TimeNs tick_ns = imu->next_nominal_time_ns();
+    // Frames captured up to this tick: simulate now, deliver after the latency.
+    while (static_cast<TimeNs>(static_cast<double>(next_frame) / rate * 1e9) <= tick_ns) {
+      const TimeNs cap = static_cast<TimeNs>(std::llround(static_cast<double>(next_frame) / rate * 1e9));
+      ++next_frame;
+      const auto mf = truth_motion.sample(cap);
+      Arrival a;
+      a.capture = cap;
+      a.arrival = cap + latency_ns;
+      a.frame = stereo->simulate(mf.pose, mf.T_world_head, cap, &gt);
+      a.T_world_leftcam = stereo->T_world_leftcam(mf.T_world_head);
+      if (a.frame.dropped) continue;  // nothing arrives
+      const double t_s = 1e-9 * static_cast<double>(cap);
+      for (std::size_t c = 0; c < 2; ++c) {
+        auto& obs = a.frame.cameras[c].markers;
+        std::size_t w = 0;
+        for (std::size_t i = 0; i < obs.size(); ++i) {
+          if (!hidden(t_s, gt.cameras[c][i].marker)) obs[w++] = obs[i];
+        }
+        obs.resize(w);
+      }
+      if (!distractors.empty()) add_distractors(distractors, *stereo, a.T_world_leftcam, a.frame);
+      in_flight.push_back(std::move(a));
+    }
+    // Deliver what has arrived by now, then the IMU tick.
+    for (auto it = in_flight.begin(); it != in_flight.end();) {
+      if (it->arrival > tick_ns) break;
+      const auto c0 = Clock::now();
+      tracker->add_stereo_frame(it->capture, it->frame.cameras[0], it->frame.cameras[1], it->T_world_leftcam);
+      tracker_s += seconds_since(c0);
+      // Consistency at the frame's capture time, while the core is there.
+      const auto& lf = tracker->last_frame();
+      if (tracker->initialized() && lf.capture_time_ns == it->capture && lf.correction.applied &&
+          tracker->filter().time_ns(0) == it->capture && it->capture >= warmup_ns) {
+        const auto truth = truth_motion.sample(it->capture);
+        auto& filter = tracker->filter();
+        for (std::size_t k = 0; k < model.segments.size(); ++k) {
+          const auto& seg = model.segments[k];
+          const Pose T_world_imu_true = truth.pose.joint(seg.segment) * imu->mountings()[seg.imu_sensor_id].T_segment_imu;
+          const auto& s = filter.state(k);
+          Eigen::Matrix<double, 6, 1> e;
+          e.head<3>() = T_world_imu_true.p - s.p_imu_in_world;
+          e.tail<3>() = boxminus(T_world_imu_true.q, s.q_world_imu);
+          const auto P = filter.segment_covariance(k);
+          Eigen::Matrix<double, 6, 6> P6;
+          P6.topLeftCorner<3, 3>() = P.block<3, 3>(vist::kErrP, vist::kErrP);
+          P6.topRightCorner<3, 3>() = P.block<3, 3>(vist::kErrP, vist::kErrTheta);
+          P6.bottomLeftCorner<3, 3>() = P.block<3, 3>(vist::kErrTheta, vist::kErrP);
+          P6.bottomRightCorner<3, 3>() = P.block<3, 3>(vist::kErrTheta, vist::kErrTheta);
+          const double nees = e.dot(P6.ldlt().solve(e));
+          if (std::isfinite(nees)) {
+            nees_sum += nees;
+            nees_in += (nees >= kChi2_6_lo && nees <= kChi2_6_hi) ? 1 : 0;
+            ++res.nees_samples;
+          }
+        }
+      }
+      it = in_flight.erase(it);
+    }
+    const auto readings = imu->next();
+    bool new_pose = false;
+    const auto c1 = Clock::now();
+    for (const auto& r : readings) {
+      ts.time_ns = r.time_ns;
+      ts.sample = r.sample;
+      ts.saturated = r.accel_saturated || r.gyro_saturated;
+      new_pose = tracker->add_imu(ts) || new_pose;
+    }
+    tracker_s += seconds_since(c1);
+    if (!tracker->initialized()) continue;
+    if (!res.acquired) {
+      res.acquired = true;
+      res.acquisition_time_s = 1e-9 * static_cast<double>(tick_ns);
+    }
+    if (!calibration_done && tick_ns >= calib_ns) {
+      calibration_done = true;
+      double smax = 0.0, ssum = 0.0, mmax = 0.0, msum = 0.0;
+      int sn = 0;
+      for (std::size_t k = 0; k < model.segments.size(); ++k) {
+        const auto& s = tracker->filter().state(k);
+        for (int a = 0; a < 3; ++a) {
+          if (scale_truth[k].leverage[a] < 0.005) continue;  // the markers do not span this axis
+          const double e = std::abs(s.scale[a] - scale_truth[k].scale[a]) / scale_truth[k].scale[a];
+          smax = std::max(smax, e);
+          ssum += e;
+          ++sn;
+        }
+        const double m = rad_to_deg(angle_between(s.q_imu_segment, q_imu_segment_truth[k]));
+        mmax = std::max(mmax, m);
+        msum += m;
+      }
+      res.scale_error_max = smax;
+      res.scale_error_mean = sn > 0 ? ssum / sn : 0.0;
+      res.mounting_error_max_deg = mmax;
+      res.mounting_error_mean_deg = msum / static_cast<double>(model.segments.size());
+    }
+    if (!new_pose) continue;
+    const HandPose& out = tracker->pose();
+    const auto truth = truth_motion.sample(out.time_ns);
+    std::array<double, 4> e{};
+    for (std::size_t i = 0; i < 4; ++i) {
+      e[i] = 1e3 * (out.joint(kKeypoints[i]).p - truth.pose.joint(kKeypoints[i]).p).norm();
+    }
+    const double t_s = 1e-9 * static_cast<double>(out.time_ns);
+    for (std::size_t i = 0; i < returns_s.size(); ++i) {
+      if (recovered[i] < 0.0 && t_s >= returns_s[i] && t_s < returns_s[i] + 9.0 &&
+          (e[0] + e[1] + e[2] + e[3]) / 4.0 < 10.0) {
+        recovered[i] = t_s - returns_s[i];
+      }
+    }
+    if (out.time_ns < warmup_ns) continue;
+    for (std::size_t i = 0; i < 4; ++i) {
+      kp_err.push_back(static_cast<float>(e[i]));
+      kp_sum[i] += e[i];
+    }
+    ++kp_n;
+    for (double je : joint_position_errors(out, truth.pose)) joint_err.push_back(static_cast<float>(1e3 * je));
+  }
+  res.wall_seconds = seconds_since(t0);
+  res.tracker_seconds = tracker_s;
+  res.sim_seconds = spec.duration_s;
+  res.recovery_s = recovered;
+  for (std::size_t i = 0; i < 4; ++i) res.keypoint_mean_mm[i] = kp_n ? kp_sum[i] / static_cast<double>(kp_n) : 0.0;
+  res.keypoint_errors_mm = kp_err;
+  res.joint_errors_mm = joint_err;
+  res.keypoints = summarize(kp_err);
+  res.all_joints = summarize(joint_err);
+  res.nees_mean = res.nees_samples ? nees_sum / static_cast<double>(res.nees_samples) : 0.0;
+  res.nees_in_95 = res.nees_samples ? static_cast<double>(nees_in) / static_cast<double>(res.nees_samples) : 0.0;
+  res.stats = tracker->stats();
+  return res;
+}
+
+Aggregate aggregate(std::string name, const std::vector<SessionResult>& sessions) {
+  Aggregate a;
+  a.name = std::move(name);
+  a.sessions = sessions.size();
+  std::vector<float> kp, joints;
+  double sim_s = 0.0, wall_s = 0.0, trk_s = 0.0, nees_w = 0.0, nees_in = 0.0;
+  std::size_t nees_n = 0, kp_n = 0;
+  for (const auto& s : sessions) {
+    kp.insert(kp.end(), s.keypoint_errors_mm.begin(), s.keypoint_errors_mm.end());
+    joints.insert(joints.end(), s.joint_errors_mm.begin(), s.joint_errors_mm.end());
+    const std::size_t n = s.keypoint_errors_mm.size() / 4;
+    for (std::size_t i = 0; i < 4; ++i) a.keypoint_mean_mm[i] += s.keypoint_mean_mm[i] * static_cast<double>(n);
+    kp_n += n;
+    a.scale_error_max = std::max(a.scale_error_max, s.scale_error_max);
+    a.mounting_error_max_deg = std::max(a.mounting_error_max_deg, s.mounting_error_max_deg);
+    nees_w += s.nees_mean * static_cast<double>(s.nees_samples);
+    nees_in += s.nees_in_95 * static_cast<double>(s.nees_samples);
+    nees_n += s.nees_samples;
+    a.recovery_s.insert(a.recovery_s.end(), s.recovery_s.begin(), s.recovery_s.end());
+    sim_s += s.sim_seconds;
+    wall_s += s.wall_seconds;
+    trk_s += s.tracker_seconds;
+    if (!s.acquired) ++a.acquisitions_failed;
+  }
+  for (auto& m : a.keypoint_mean_mm) m = kp_n ? m / static_cast<double>(kp_n) : 0.0;
+  a.keypoints = summarize(kp);
+  a.all_joints = summarize(joints);
+  a.nees_mean = nees_n ? nees_w / static_cast<double>(nees_n) : 0.0;
+  a.nees_in_95 = nees_n ? nees_in / static_cast<double>(nees_n) : 0.0;
+  a.realtime_factor = wall_s > 0.0 ? sim_s / wall_s : 0.0;
+  a.tracker_realtime_factor = trk_s > 0.0 ? sim_s / trk_s : 0.0;
+  return a;
+}
+
+}  // namespace proprio::vist_eval

@@ -84,7 +84,8 @@ int run_bench_vist(const BenchVistArgs& a) {
   const bool all = a.suite == "all";
   if (all || a.suite == "free") cases.push_back({"free_motion", Challenge::none, Ablation::full, a.minutes});
   if (all || a.suite == "challenges") {
-    for (auto c : {Challenge::occlude_half, Challenge::out_of_view, Challenge::distractors, Challenge::dropped_frames}) {
+    for (auto c : {Challenge::occlude_half, Challenge::out_of_view, Challenge::distractors, Challenge::dropped_frames,
+                   Challenge::imu_unplug}) {
       cases.push_back({std::string(vist_eval::to_string(c)), c, Ablation::full, a.challenge_minutes});
     }
   }
@@ -193,7 +194,7 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
       "vist",
       "Run the VIST evaluation protocol on simulated subjects and print the accuracy:\n"
       "free motion (a random target pose every 3 s), challenges (half the markers occluded 2 s,\n"
-      "hand out of view 3 s, distractor blobs, 10% dropped frames) and ablations (IMU only,\n"
+      "hand out of view 3 s, distractor blobs, 10% dropped frames, IMU board unplugged 1 s) and ablations (IMU only,\n"
       "vision only, correspondence search without IMU priors).");
   vist->add_option("--subjects", args->subjects, "simulated subjects per case, spread over hand sizes")
       ->check(CLI::Range(1, sim::kSimSubjectCount))

@@ -221,9 +221,8 @@ VistFilter::VistFilter(VistModel model, FilterOptions options)
   q_param_acc_.assign(n, Eigen::Matrix<double, 6, 1>::Zero());
   dirty_.assign(n, false);
   P_ = Eigen::MatrixXd::Zero(N, N);
-  P_backup_ = P_;
-  rows_tmp_.resize(15, N);
-  cols_tmp_.resize(N, 15);
+  rows_tmp_.resize(9, N);
+  cols_tmp_.resize(N, 9);
   const int max_blocks = static_cast<int>(model_.markers.size() + model_.position_constraints.size() +
                                           model_.rotation_constraints.size() + model_.scale_couplings.size());
   max_rows_ = 3 * static_cast<int>(model_.markers.size() + model_.position_constraints.size() +
@@ -329,21 +328,7 @@ bool VistFilter::propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, c
   SegmentState& s = states_[k];
   const Vec3 gyro_mean = 0.5 * (gyro_prev + gyro_radps);
   const Vec3 accel_mean = 0.5 * (accel_prev + accel_mps2);
-  const Vec3 w = gyro_mean - s.gyro_bias_radps;
-  const Vec3 a = accel_mean - s.accel_bias_mps2;
-  const Mat3 R = s.q_world_imu.toRotationMatrix();
-  const Mat3 Ra = R * skew(a);
-
-  // Discrete transition of eq. 4.24 (first order, with the exact rotation block).
-  Mat15 phi = Mat15::Identity();
-  phi.block<3, 3>(0, 3) = Mat3::Identity() * dt;
-  phi.block<3, 3>(0, 6) = -0.5 * dt * dt * Ra;
-  phi.block<3, 3>(0, 12) = -0.5 * dt * dt * R;
-  phi.block<3, 3>(3, 6) = -dt * Ra;
-  phi.block<3, 3>(3, 9) = 0.5 * dt * dt * Ra;
-  phi.block<3, 3>(3, 12) = -dt * R;
-  phi.block<3, 3>(6, 6) = so3_exp(-dt * w).toRotationMatrix();
-  phi.block<3, 3>(6, 9) = -dt * Mat3::Identity();
+  const Mat15 phi = transition(s, dt, gyro_mean, accel_mean);
 
   // Noise (eq. 4.25 with densities): white accel and gyro noise enter velocity
   // and attitude; the biases walk.
@@ -372,6 +357,25 @@ bool VistFilter::propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, c
   return true;
 }
 
+Eigen::Matrix<double, 15, 15> VistFilter::transition(const SegmentState& s, double dt, const Vec3& gyro_mean,
+                                                     const Vec3& accel_mean) {
+  const Vec3 w = gyro_mean - s.gyro_bias_radps;
+  const Vec3 a = accel_mean - s.accel_bias_mps2;
+  const Mat3 R = s.q_world_imu.toRotationMatrix();
+  const Mat3 Ra = R * skew(a);
+  // First order in dt, with the exact rotation block.
+  Mat15 phi = Mat15::Identity();
+  phi.block<3, 3>(0, 3) = Mat3::Identity() * dt;
+  phi.block<3, 3>(0, 6) = -0.5 * dt * dt * Ra;
+  phi.block<3, 3>(0, 12) = -0.5 * dt * dt * R;
+  phi.block<3, 3>(3, 6) = -dt * Ra;
+  phi.block<3, 3>(3, 9) = 0.5 * dt * dt * Ra;
+  phi.block<3, 3>(3, 12) = -dt * R;
+  phi.block<3, 3>(6, 6) = so3_exp(-dt * w).toRotationMatrix();
+  phi.block<3, 3>(6, 9) = -dt * Mat3::Identity();
+  return phi;
+}
+
 void VistFilter::propagate_all_to(TimeNs t_ns) noexcept {
   for (std::size_t k = 0; k < states_.size(); ++k) {
     if (t_ns > times_[k]) {
@@ -390,10 +394,13 @@ void VistFilter::flush() noexcept {
   for (std::size_t k = 0; k < states_.size(); ++k) {
     if (!dirty_[k]) continue;
     const int o = static_cast<int>(k) * D;
-    rows_tmp_.noalias() = phi_acc_[k] * P_.middleRows(o, 15);
-    P_.middleRows(o, 15) = rows_tmp_;
-    cols_tmp_.noalias() = P_.middleCols(o, 15) * phi_acc_[k].transpose();
-    P_.middleCols(o, 15) = cols_tmp_;
+    // The bias rows of the transition stay identity (biases only walk), so
+    // only the position, velocity and attitude rows and columns change.
+    const auto phi9 = phi_acc_[k].topRows<9>();
+    rows_tmp_.noalias() = phi9 * P_.middleRows(o, 15);
+    P_.middleRows(o, 9) = rows_tmp_;
+    cols_tmp_.noalias() = P_.middleCols(o, 15) * phi9.transpose();
+    P_.middleCols(o, 9) = cols_tmp_;
     P_.block<15, 15>(o, o) += q_acc_[k];
     for (int i = 0; i < 6; ++i) P_(o + 15 + i, o + 15 + i) += q_param_acc_[k](i);
     phi_acc_[k].setIdentity();
@@ -518,7 +525,7 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
     ++st.markers_used;
     r_.segment<3>(rows) = res;
     b.Hb.setZero();
-    S_.block<3, 3>(rows, rows) = Rm;  // noise; H P Hᵀ is added below
+    b.R = Rm;
     blocks_.push_back(b);
     rows += 3;
   }
@@ -533,7 +540,7 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
       b.seg_b = static_cast<int>(c.child);
       const Vec3 v = position_constraint_model(states_[c.parent], states_[c.child], c, &b.Ha, &b.Hb);
       r_.segment<3>(rows) = -v;
-      S_.block<3, 3>(rows, rows) = Mat3::Identity() * sp2;
+      b.R = Mat3::Identity() * sp2;
       blocks_.push_back(b);
       rows += 3;
     }
@@ -551,7 +558,7 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
       b.Ha.row(0) = Hp;
       b.Hb.row(0) = Hc;
       r_(rows) = -v;
-      S_(rows, rows) = sr2;
+      b.R(0, 0) = sr2;
       blocks_.push_back(b);
       rows += 1;
     }
@@ -567,7 +574,7 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
       b.Ha.block<3, 3>(0, kErrScale) = Mat3::Identity();
       b.Hb.block<3, 3>(0, kErrScale) = -Mat3::Identity();
       r_.segment<3>(rows) = -(states_[c.a].scale - states_[c.b].scale);
-      S_.block<3, 3>(rows, rows) = Mat3::Identity() * sc2;
+      b.R = Mat3::Identity() * sc2;
       blocks_.push_back(b);
       rows += 3;
     }
@@ -583,21 +590,14 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
       PHt.middleCols(b.row, b.dim).noalias() += P_.middleCols(b.seg_b * D, D) * b.Hb.topRows(b.dim).transpose();
     }
   }
-  // S = H P Hᵀ + R (R already on the diagonal blocks; off-diagonal noise is zero).
+  // S = H P Hᵀ + R (measurement noises are independent: R is block-diagonal).
   auto S = S_.topLeftCorner(rows, rows);
-  for (const auto& bi : blocks_) {
-    for (const auto& bj : blocks_) {
-      if (bj.row == bi.row) continue;
-      S.block(bi.row, bj.row, bi.dim, bj.dim).setZero();
-    }
-  }
+  S.setZero();
   for (const auto& b : blocks_) {
+    S.block(b.row, b.row, b.dim, b.dim) = b.R.topLeftCorner(b.dim, b.dim);
     S.middleRows(b.row, b.dim).noalias() += b.Ha.topRows(b.dim) * PHt.middleRows(b.seg_a * D, D);
     if (b.seg_b >= 0) S.middleRows(b.row, b.dim).noalias() += b.Hb.topRows(b.dim) * PHt.middleRows(b.seg_b * D, D);
   }
-
-  P_backup_ = P_;
-  std::copy(states_.begin(), states_.end(), states_backup_.begin());
 
   Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(S);
   if (llt.info() != Eigen::Success) {
@@ -606,27 +606,32 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
   }
   Sinv_r_.head(rows) = llt.solve(r_.head(rows));
   dx_.noalias() = PHt * Sinv_r_.head(rows);
+  // Undo nothing: refuse a correction that is not finite before touching anything.
+  bool ok = dx_.allFinite();
+  for (std::size_t k = 0; k < states_.size() && ok; ++k) {
+    states_backup_[k] = states_[k];
+    inject(states_backup_[k], dx_.segment<D>(static_cast<int>(k) * D));
+    ok = state_finite(states_backup_[k]);
+  }
+  if (!ok) {
+    ++health_.non_finite_rejected;
+    logger().warn("VIST filter: a correction came out non-finite; skipped");
+    return st;
+  }
+  for (std::size_t k = 0; k < states_.size(); ++k) {
+    states_[k] = states_backup_[k];
+    states_[k].scale = states_[k].scale.cwiseMax(options_.min_scale).cwiseMin(options_.max_scale);
+  }
   auto W = W_.topRows(rows);
   W = PHt.transpose();
   llt.matrixL().solveInPlace(W);
   P_.selfadjointView<Eigen::Lower>().rankUpdate(W.transpose(), -1.0);
   P_.triangularView<Eigen::StrictlyUpper>() = P_.transpose();
-
-  bool ok = dx_.allFinite() && P_.allFinite();
-  if (ok) {
-    for (std::size_t k = 0; k < states_.size(); ++k) {
-      inject(states_[k], dx_.segment<D>(static_cast<int>(k) * D));
-      states_[k].scale = states_[k].scale.cwiseMax(options_.min_scale).cwiseMin(options_.max_scale);
-      ok = ok && state_finite(states_[k]);
-    }
-    for (int i = 0; i < P_.rows() && ok; ++i) ok = P_(i, i) > 0.0;
-  }
-  if (!ok) {
-    P_ = P_backup_;
-    std::copy(states_backup_.begin(), states_backup_.end(), states_.begin());
-    ++health_.non_finite_rejected;
-    logger().warn("VIST filter: a correction produced a non-finite or non-positive covariance; undone");
-    return st;
+  bool positive = P_.allFinite();
+  for (int i = 0; i < P_.rows() && positive; ++i) positive = P_(i, i) > 0.0;
+  if (!positive) {
+    logger().warn("VIST filter: covariance lost positive-definiteness in a correction; repairing");
+    check_health();
   }
   st.applied = true;
   ++health_.corrections;
@@ -635,8 +640,12 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
 }
 
 void VistFilter::check_health() noexcept {
-  Eigen::LLT<Eigen::MatrixXd> llt(P_);
-  if (llt.info() == Eigen::Success) return;
+  if (P_.allFinite()) {
+    Eigen::LLT<Eigen::MatrixXd> llt(P_);
+    if (llt.info() == Eigen::Success) return;
+  } else {
+    P_ = P_.unaryExpr([](double v) { return std::isfinite(v) ? v : 0.0; });
+  }
   // Clamp the spectrum: keeps the directions, restores positive-definiteness.
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(P_);
   Eigen::VectorXd ev = es.eigenvalues().cwiseMax(1e-12);

@@ -100,6 +100,7 @@ std::string_view to_string(Challenge c) noexcept {
     case Challenge::out_of_view: return "out_of_view";
     case Challenge::distractors: return "distractors";
     case Challenge::dropped_frames: return "dropped_frames";
+    case Challenge::imu_unplug: return "imu_unplug";
   }
   return "?";
 }
@@ -222,6 +223,9 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
   if (spec.challenge == Challenge::out_of_view) {
     for (double t = 12.0; t < spec.duration_s - 1.0; t += 12.0) returns_s.push_back(t);
   }
+  if (spec.challenge == Challenge::imu_unplug) {
+    for (double t = 11.0; t < spec.duration_s - 1.0; t += 15.0) returns_s.push_back(t);
+  }
   std::vector<double> recovered(returns_s.size(), -1.0);
 
   const double rate = stereo->rig().rate_hz;
@@ -309,8 +313,11 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
     }
     const auto readings = imu->next();
     bool new_pose = false;
+    const double tick_s = 1e-9 * static_cast<double>(tick_ns);
+    const bool unplugged = spec.challenge == Challenge::imu_unplug && tick_s >= 10.0 && std::fmod(tick_s - 10.0, 15.0) < 1.0;
     const auto c1 = Clock::now();
     for (const auto& r : readings) {
+      if (unplugged) break;
       ts.time_ns = r.time_ns;
       ts.sample = r.sample;
       ts.saturated = r.accel_saturated || r.gyro_saturated;

@@ -205,7 +205,7 @@ struct CorrectionStats {
 struct FilterHealth {
   std::uint64_t corrections = 0;
   std::uint64_t covariance_repairs = 0;   // not positive-definite: eigenvalues clamped
-  std::uint64_t non_finite_rejected = 0;  // a correction that would produce NaN/inf was undone
+  std::uint64_t non_finite_rejected = 0;  // a correction that would produce NaN/inf was skipped
   std::uint64_t imu_steps = 0;
 };
 
@@ -265,6 +265,11 @@ class VistFilter {
   static void integrate_nominal(SegmentState& s, double dt_s, const Vec3& gyro_mean, const Vec3& accel_mean,
                                 const Vec3& g_world) noexcept;
 
+  // Error-state transition of one IMU step (eq. 4.24 discretised), for mean
+  // raw samples over dt; what propagate() applies. Exposed for tests.
+  static Eigen::Matrix<double, 15, 15> transition(const SegmentState& s, double dt_s, const Vec3& gyro_mean,
+                                                   const Vec3& accel_mean);
+
   // Residual and Jacobians of the measurement models (exposed for the
   // finite-difference tests). H blocks are 3 x 21 / 1 x 21 per segment.
   using H3 = Eigen::Matrix<double, 3, kSegmentErrorDim>;
@@ -288,7 +293,7 @@ class VistFilter {
   Vec3 g_world_;
   bool initialized_ = false;
   std::vector<SegmentState> states_;
-  std::vector<SegmentState> states_backup_;  // undo buffer of correct()
+  std::vector<SegmentState> states_backup_;  // corrected states, checked before they replace states_
   std::vector<TimeNs> times_;
   std::vector<Vec3> last_gyro_, last_accel_;
   std::vector<bool> has_sample_;
@@ -298,15 +303,15 @@ class VistFilter {
   std::vector<bool> dirty_;
   Eigen::MatrixXd P_;
   // Work buffers sized once (no allocation in correct()).
-  Eigen::MatrixXd P_backup_;
-  Eigen::Matrix<double, 15, Eigen::Dynamic> rows_tmp_;
-  Eigen::Matrix<double, Eigen::Dynamic, 15> cols_tmp_;
+  Eigen::Matrix<double, 9, Eigen::Dynamic> rows_tmp_;
+  Eigen::Matrix<double, Eigen::Dynamic, 9> cols_tmp_;
   Eigen::MatrixXd PHt_, S_, W_;
   Eigen::VectorXd r_, Sinv_r_, dx_;
   struct RowBlock {
     int row = 0, dim = 0;
     int seg_a = -1, seg_b = -1;
     Eigen::Matrix<double, 3, kSegmentErrorDim> Ha, Hb;
+    Mat3 R = Mat3::Zero();  // measurement noise of this block
   };
   std::vector<RowBlock> blocks_;
   int max_rows_ = 0;

@@ -28,6 +28,7 @@ enum class Challenge : std::uint8_t {
   out_of_view,      // the hand out of the cameras' view for 3 s, every 12 s
   distractors,      // static blobs of marker colours in the background
   dropped_frames,   // 10 % of stereo frames lost
+  imu_unplug,       // the IMU board unplugged for 1 s every 15 s (from 10 s), then back
 };
 enum class Ablation : std::uint8_t {
   full,

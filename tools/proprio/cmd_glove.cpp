@@ -1,5 +1,532 @@
-// placeholder: filled in by the issue-4 work
+// proprio glove list|monitor|emulate: the USB HID IMU glove (protocol in
+// docs/glove-hid-protocol.md).
+//   list     HID devices with the glove's VID/PID (or all of them)
+//   monitor  open a glove (or a capture file), decode, print rates, loss and
+//            per-IMU statistics; rides through unplugging and replugging
+//   emulate  write the reports an emulated glove sends for a simulated hand
+//            to a file that `monitor --from-file` reads
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cerrno>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <thread>
+#include <vector>
+
 #include "commands.hpp"
+#include "progress.hpp"
+#include "proprio/core/glove_description.hpp"
+#include "proprio/core/log.hpp"
+#include "proprio/devices/glove_device.hpp"
+#include "proprio/devices/glove_emulator.hpp"
+#include "proprio/devices/glove_protocol.hpp"
+#include "proprio/devices/glove_stream.hpp"
+#include "proprio/devices/hid_transport.hpp"
+#include "proprio/sim/hand_motion.hpp"
+#include "proprio/sim/imu_sim.hpp"
+#include "proprio/sim/subjects.hpp"
+
 namespace proprio::cli {
-void add_glove_command(CLI::App&, int&) {}
+
+namespace {
+
+using namespace proprio::devices;
+
+std::atomic<bool> g_stop{false};
+extern "C" void on_glove_sigint(int) {
+  g_stop.store(true);
+  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
+}
+
+// USB IDs are hexadecimal by convention: "1209", "0x1209".
+std::string check_hex_id(const std::string& text) {
+  char* end = nullptr;
+  const unsigned long v = std::strtoul(text.c_str(), &end, 16);
+  if (text.empty() || *end != '\0' || v > 0xFFFF) return "'" + text + "' is not a 16-bit hexadecimal USB ID";
+  return {};
+}
+std::uint16_t parse_hex_id(const std::string& text) {
+  return static_cast<std::uint16_t>(std::strtoul(text.c_str(), nullptr, 16));
+}
+std::string hex4(std::uint16_t v) {
+  char buf[8];
+  std::snprintf(buf, sizeof buf, "%04x", v);
+  return buf;
+}
+
+// ---------------------------------------------------------------------------
+// list
+
+struct ListArgs {
+  bool all = false;
+  std::string vid = hex4(kGloveUsbVendorId);
+  std::string pid = hex4(kGloveUsbProductId);
+};
+
+int run_list(const ListArgs& a) {
+  const std::uint16_t vid = a.all ? 0 : parse_hex_id(a.vid);
+  const std::uint16_t pid = a.all ? 0 : parse_hex_id(a.pid);
+  auto devices = enumerate_hid_devices(vid, pid);
+  if (!devices) return logger().error("{}", devices.error().message), 1;
+  if (devices->empty()) {
+    if (a.all) {
+      std::printf("no HID devices found (hidapi %s)\n", hidapi_version().c_str());
+    } else {
+      std::printf("no glove found with VID:PID %s:%s; 'proprio glove list --all' lists every HID device\n",
+                  hex4(vid).c_str(), hex4(pid).c_str());
+    }
+    return 0;
+  }
+  std::printf("%-20s %-9s %-8s %-4s %-16s %s\n", "path", "vid:pid", "usage", "intf", "serial", "manufacturer / product");
+  for (const HidDeviceInfo& d : *devices) {
+    const bool glove = d.vendor_id == kGloveUsbVendorId && d.product_id == kGloveUsbProductId &&
+                       (d.usage_page == 0 || d.usage_page == kGloveHidUsagePage);
+    std::printf("%-20s %s:%s %04x:%02x %-4d %-16s %s / %s%s\n", d.path.c_str(), hex4(d.vendor_id).c_str(),
+                hex4(d.product_id).c_str(), d.usage_page, d.usage, d.interface_number,
+                d.serial.empty() ? "-" : d.serial.c_str(), d.manufacturer.c_str(), d.product.c_str(),
+                glove ? "  [glove]" : "");
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------
+// monitor
+
+struct MonitorArgs {
+  std::string vid = hex4(kGloveUsbVendorId);
+  std::string pid = hex4(kGloveUsbProductId);
+  std::string serial;
+  std::string path;
+  double seconds = 0.0;
+  double interval_s = 1.0;
+  double rate_hz = 100.0;
+  std::string from_file;
+};
+
+struct LastValues {
+  bool seen = false;
+  Vec3 accel = Vec3::Zero();
+  Vec3 gyro = Vec3::Zero();
+};
+
+double percent(std::uint64_t part, std::uint64_t whole) {
+  return whole == 0 ? 0.0 : 100.0 * static_cast<double>(part) / static_cast<double>(whole);
+}
+
+// The per-IMU table and totals both monitor modes end with. span_s: the
+// device time the samples cover (rates are per device second).
+void print_summary(const GloveStreamStats& s, double span_s, const std::array<LastValues, kGloveMaxImus>& last) {
+  const std::uint64_t expected = s.accepted + s.late + s.lost;
+  std::printf("\nreports: %llu read, %llu accepted, %llu lost (%.2f%%), %llu duplicate, %llu late, %llu undecodable",
+              static_cast<unsigned long long>(s.reports), static_cast<unsigned long long>(s.accepted),
+              static_cast<unsigned long long>(s.lost), percent(s.lost, expected),
+              static_cast<unsigned long long>(s.duplicates), static_cast<unsigned long long>(s.late),
+              static_cast<unsigned long long>(s.decode_errors));
+  if (s.other_reports) std::printf(", %llu other", static_cast<unsigned long long>(s.other_reports));
+  if (s.accepted == 0) {
+    std::printf("\nno IMU data\n");
+    return;
+  }
+  std::printf("\ndevice: %u IMUs, tick period %.1f us, %llu restart(s), %llu overrun tick(s), %llu sequence wrap(s), "
+              "%llu timestamp wrap(s)\n",
+              s.imu_total, s.tick_period_us, static_cast<unsigned long long>(s.device_resets),
+              static_cast<unsigned long long>(s.device_overruns), static_cast<unsigned long long>(s.sequence_wraps),
+              static_cast<unsigned long long>(s.timestamp_wraps));
+  if (s.decode_errors) {
+    std::printf("undecodable by reason:");
+    for (std::size_t c = 1; c < kGloveDecodeErrcCount; ++c) {
+      if (s.decode_errors_by_code[c]) {
+        std::printf(" %s %llu", to_string(static_cast<GloveDecodeErrc>(c)),
+                    static_cast<unsigned long long>(s.decode_errors_by_code[c]));
+      }
+    }
+    std::printf("\nlast: %s\n", describe(s.last_decode_error).c_str());
+  }
+  std::printf("\n%-4s %9s %8s %7s %8s %8s %7s  %-26s %s\n", "IMU", "good", "rate Hz", "stale", "acc sat", "gyr sat",
+              "errors", "last accel m/s^2", "last gyro rad/s");
+  for (std::size_t i = 0; i < kGloveMaxImus; ++i) {
+    const GloveImuStats& m = s.imus[i];
+    if (m.good + m.rejected == 0) continue;
+    char accel[64] = "-", gyro[64] = "-";
+    if (last[i].seen) {
+      std::snprintf(accel, sizeof accel, "%7.2f %7.2f %7.2f", last[i].accel.x(), last[i].accel.y(), last[i].accel.z());
+      std::snprintf(gyro, sizeof gyro, "%6.2f %6.2f %6.2f", last[i].gyro.x(), last[i].gyro.y(), last[i].gyro.z());
+    }
+    std::printf("%-4zu %9llu %8.1f %7llu %8llu %8llu %7llu  %-26s %s\n", i, static_cast<unsigned long long>(m.good),
+                span_s > 0 ? static_cast<double>(m.good + m.rejected) / span_s : 0.0,
+                static_cast<unsigned long long>(m.stale), static_cast<unsigned long long>(m.accel_saturated),
+                static_cast<unsigned long long>(m.gyro_saturated), static_cast<unsigned long long>(m.sensor_error),
+                accel, gyro);
+  }
+}
+
+// Whether a complete report with a matching CRC starts at `at`.
+bool valid_frame_at(std::span<const std::uint8_t> bytes, std::size_t at) {
+  const std::size_t size = report_size_for_id(bytes[at]);
+  if (size == 0 || bytes.size() - at < size) return false;
+  const auto frame = bytes.subspan(at, size);
+  return crc16_ccitt(frame.first(size - 2)) == static_cast<std::uint16_t>(frame[size - 2] | frame[size - 1] << 8);
+}
+
+// A capture file: report after report as hid_read returns them; each report's
+// ID gives its size. After a bad frame the reader goes on at the next offset
+// where a valid report starts: a corrupted payload costs that report, a
+// corrupted ID byte or a torn write costs no more than the bytes up to the
+// next good report.
+int monitor_file(const MonitorArgs& a) {
+  std::ifstream in(a.from_file, std::ios::binary);
+  if (!in) {
+    return logger().error("cannot open {}: {}; pass a file written by 'proprio glove emulate --out'", a.from_file,
+                          std::strerror(errno)),
+           1;
+  }
+  const std::vector<std::uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  GloveStreamOptions so;
+  so.nominal_rate_hz = a.rate_hz;
+  GloveStreamDecoder decoder(so);
+  std::array<GloveSample, kGloveImusPerReport> out;
+  std::array<LastValues, kGloveMaxImus> last{};
+  std::uint64_t skipped_bytes = 0;
+  std::size_t next_good = 0;  // the next offset where a valid report starts, once searched for
+  // Device time covered, summed over epochs (a restart starts a new timeline).
+  double span_s = 0.0;
+  bool in_epoch = false;
+  std::int64_t epoch_first_us = 0, epoch_last_us = 0;
+  std::uint32_t epoch = 0;
+  for (std::size_t at = 0; at < bytes.size();) {
+    std::size_t size = report_size_for_id(bytes[at]);
+    if (size == 0) {
+      ++skipped_bytes;
+      ++at;
+      continue;
+    }
+    size = std::min(size, bytes.size() - at);
+    if (!valid_frame_at(bytes, at) && at + size < bytes.size() && !valid_frame_at(bytes, at + size)) {
+      // Neither this report nor the next is good: framing may be lost. Find
+      // where the next good report starts (once per damaged stretch).
+      if (next_good <= at) {
+        next_good = at + 1;
+        while (next_good < bytes.size() && !valid_frame_at(bytes, next_good)) ++next_good;
+      }
+      if ((next_good - at) % size != 0) {
+        skipped_bytes += next_good - at;  // torn or shifted: not whole reports
+        at = next_good;
+        continue;
+      }
+      // Whole reports, just damaged: decode them so they count as undecodable.
+    }
+    const auto r = decoder.push(std::span(bytes).subspan(at, size), out);
+    at += size;
+    if (r.verdict != GloveReportVerdict::accepted) continue;
+    if (!in_epoch || r.epoch != epoch) {
+      if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
+      in_epoch = true;
+      epoch = r.epoch;
+      epoch_first_us = epoch_last_us = r.device_time_us;
+    }
+    epoch_last_us = std::max(epoch_last_us, r.device_time_us);
+    for (std::size_t i = 0; i < r.sample_count; ++i) {
+      auto& l = last[out[i].imu.sensor_id];
+      l = {true, out[i].imu.accel_mps2, out[i].imu.gyro_radps};
+    }
+  }
+  if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
+  const GloveStreamStats& s = decoder.stats();
+  // A tick's span is one period longer than first-to-last.
+  if (s.accepted > 0) span_s += s.tick_period_us * 1e-6 * static_cast<double>(s.device_resets + 1);
+  std::printf("%s: %zu bytes, %.2f s of device time", a.from_file.c_str(), bytes.size(), span_s);
+  if (skipped_bytes) std::printf(", %llu bytes skipped to resynchronise", static_cast<unsigned long long>(skipped_bytes));
+  std::printf("\n");
+  print_summary(s, span_s, last);
+  return s.accepted > 0 ? 0 : 1;
+}
+
+int monitor_live(const MonitorArgs& a) {
+  HidDeviceSelector sel;
+  sel.vendor_id = parse_hex_id(a.vid);
+  sel.product_id = parse_hex_id(a.pid);
+  sel.serial = a.serial;
+  sel.path = a.path;
+  GloveDeviceOptions o;
+  o.stream.nominal_rate_hz = a.rate_hz;
+  GloveDevice device(std::make_unique<HidapiTransport>(sel), o);
+  device.set_state_callback([](GloveLinkState state, std::string_view detail) {
+    // On the reader thread; stdout is line-buffered per call.
+    std::printf("[%s] %.*s\n", to_string(state), static_cast<int>(detail.size()), detail.data());
+    std::fflush(stdout);
+  });
+  if (a.seconds > 0) {
+    std::printf("monitoring %s for %g s (Ctrl-C stops early)\n", sel.describe().c_str(), a.seconds);
+  } else {
+    std::printf("monitoring %s (Ctrl-C to stop)\n", sel.describe().c_str());
+  }
+  g_stop.store(false);
+  auto previous = std::signal(SIGINT, on_glove_sigint);
+  if (auto s = device.start(); !s) {
+    std::signal(SIGINT, previous);
+    return logger().error("{}", s.error().message), 1;
+  }
+  const auto start = std::chrono::steady_clock::now();
+  auto next_print = start + std::chrono::duration<double>(a.interval_s);
+  std::array<LastValues, kGloveMaxImus> last{};
+  GloveDeviceStats prev = device.stats();
+  auto prev_time = start;
+  GloveSample sample;
+  while (!g_stop.load()) {
+    while (device.pop(sample)) last[sample.imu.sensor_id % kGloveMaxImus] = {true, sample.imu.accel_mps2, sample.imu.gyro_radps};
+    const auto now = std::chrono::steady_clock::now();
+    const double elapsed = std::chrono::duration<double>(now - start).count();
+    if (a.seconds > 0 && elapsed >= a.seconds) break;
+    if (now >= next_print) {
+      const GloveDeviceStats st = device.stats();
+      const double dt = std::chrono::duration<double>(now - prev_time).count();
+      const auto d = [&](std::uint64_t cur, std::uint64_t old) { return static_cast<double>(cur - old); };
+      const double lat_n = d(st.excess_latency_count, prev.excess_latency_count);
+      const double lat_avg_ms =
+          lat_n > 0 ? (st.excess_latency_sum_ns - prev.excess_latency_sum_ns) / lat_n * 1e-6 : 0.0;
+      std::printf("%7.1fs %-12s %6.1f reports/s %7.1f samples/s  lost %llu  dup %llu  late %llu  bad %llu  "
+                  "rejected %llu  restarts %llu  clock %s %+.1f ppm  latency above floor %.2f ms\n",
+                  elapsed, to_string(st.state), d(st.reports_read, prev.reports_read) / dt,
+                  d(st.samples_delivered, prev.samples_delivered) / dt,
+                  static_cast<unsigned long long>(st.stream.lost - prev.stream.lost),
+                  static_cast<unsigned long long>(st.stream.duplicates - prev.stream.duplicates),
+                  static_cast<unsigned long long>(st.stream.late - prev.stream.late),
+                  static_cast<unsigned long long>(st.stream.decode_errors - prev.stream.decode_errors),
+                  static_cast<unsigned long long>(st.samples_rejected - prev.samples_rejected),
+                  static_cast<unsigned long long>(st.stream.device_resets), st.clock_locked ? "locked" : "unlocked",
+                  st.clock_skew_ppm, lat_avg_ms);
+      std::fflush(stdout);
+      prev = st;
+      prev_time = now;
+      next_print += std::chrono::duration<double>(a.interval_s);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  device.stop();
+  std::signal(SIGINT, previous);
+  const GloveDeviceStats st = device.stats();
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("\n%.1f s: %llu connect(s), %llu disconnect(s), %llu failed open(s); %llu samples delivered, %llu "
+              "rejected, %llu dropped at a full queue; clock %+.2f ppm, %llu re-lock(s), time clamps %llu, "
+              "latency above floor: mean %.2f ms, max %.2f ms",
+              elapsed, static_cast<unsigned long long>(st.connects), static_cast<unsigned long long>(st.disconnects),
+              static_cast<unsigned long long>(st.open_failures), static_cast<unsigned long long>(st.samples_delivered),
+              static_cast<unsigned long long>(st.samples_rejected), static_cast<unsigned long long>(st.queue_overruns),
+              st.clock_skew_ppm, static_cast<unsigned long long>(st.clock_relocks),
+              static_cast<unsigned long long>(st.time_clamps),
+              st.excess_latency_count ? st.excess_latency_sum_ns / static_cast<double>(st.excess_latency_count) * 1e-6 : 0.0,
+              static_cast<double>(st.excess_latency_max_ns) * 1e-6);
+  if (st.have_info) {
+    std::printf("\nfirmware %u.%u.%u, %u IMUs at %u Hz, %s, %s", st.info.firmware[0], st.info.firmware[1],
+                st.info.firmware[2], st.info.imu_count, st.info.rate_hz, to_string(st.info.accel_range),
+                to_string(st.info.gyro_range));
+  }
+  print_summary(st.stream, elapsed, last);
+  if (st.stream.accepted == 0) {
+    logger().error("no IMU data received from {}", sel.describe());
+    return 1;
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------
+// emulate
+
+struct EmulateArgs {
+  std::string out;
+  double seconds = 10.0;
+  std::uint64_t seed = 1;
+  int subject = 3;
+  std::string protocol = "free-motion";
+  std::string hand = "right";
+  int rate_hz = 100;
+  double clock_ppm = 0.0;
+  std::uint32_t start_timestamp_us = 0;
+  double drop = 0.0, duplicate = 0.0, corrupt = 0.0, reorder = 0.0, stale = 0.0;
+  std::vector<std::string> unplugs;
+  bool force = false;
+};
+
+std::string check_unplug(const std::string& text) {
+  const auto colon = text.find(':');
+  char* end = nullptr;
+  if (colon == std::string::npos) return "'" + text + "': use AT:FOR, seconds, e.g. 2.5:1";
+  const double at = std::strtod(text.substr(0, colon).c_str(), &end);
+  if (*end != '\0' || !(at >= 0)) return "'" + text + "': AT must be seconds >= 0";
+  const double dur = std::strtod(text.substr(colon + 1).c_str(), &end);
+  if (*end != '\0' || !(dur > 0)) return "'" + text + "': FOR must be seconds > 0";
+  return {};
+}
+
+int run_emulate(const EmulateArgs& a) {
+  if (!a.force && std::filesystem::exists(a.out)) {
+    return logger().error("{} exists; pass --force to overwrite it", a.out), 1;
+  }
+  auto subject = sim::sim_subject(a.subject);
+  if (!subject) return logger().error("{}", subject.error().message), 2;
+  auto shape = subject->shape();
+  if (!shape) return logger().error("{}", shape.error().message), 2;
+  sim::HandMotionOptions mo;
+  mo.protocol = *sim::parse_motion_protocol(a.protocol);  // CLI11 checked the name
+  mo.hand = *parse_handedness(a.hand);
+  mo.seed = mix_seed(a.seed, 1);
+  sim::HandMotionGenerator motion(HandModel(*shape), mo);
+  sim::ImuNoiseOptions no;
+  no.sample_rate_hz = a.rate_hz;
+  auto imu = sim::ImuSimulator::create(motion, GloveDescription::vist_default().place_imus(*shape, mo.hand), no,
+                                       mix_seed(a.seed, 2));
+  if (!imu) return logger().error("{}", imu.error().message), 2;
+
+  GloveEmulatorOptions eo;
+  eo.imu_count = static_cast<std::uint8_t>(imu->imu_count());
+  eo.rate_hz = static_cast<std::uint16_t>(a.rate_hz);
+  eo.clock_error_ppm = a.clock_ppm;
+  eo.boot_timestamp_us = a.start_timestamp_us;
+  eo.seed = mix_seed(a.seed, 3);
+  eo.faults.drop_probability = a.drop;
+  eo.faults.duplicate_probability = a.duplicate;
+  eo.faults.corrupt_probability = a.corrupt;
+  eo.faults.reorder_probability = a.reorder;
+  eo.faults.stale_probability = a.stale;
+  for (const std::string& u : a.unplugs) {
+    const auto colon = u.find(':');
+    eo.faults.unplugs.push_back({seconds_to_ns(std::strtod(u.substr(0, colon).c_str(), nullptr)),
+                                 seconds_to_ns(std::strtod(u.substr(colon + 1).c_str(), nullptr))});
+  }
+  auto emulator = GloveEmulator::create(eo);
+  if (!emulator) return logger().error("{}", emulator.error().message), 2;
+
+  std::ofstream file(a.out, std::ios::binary | std::ios::trunc);
+  if (!file) return logger().error("cannot write {}: {}", a.out, std::strerror(errno)), 1;
+  logger().info("{}", subject->describe());
+  logger().info("IMUs: {}", imu->describe());
+  const auto ticks = static_cast<std::int64_t>(a.seconds * a.rate_hz);
+  ProgressBar progress("glove emulate", a.seconds, "s emulated");
+  std::vector<GloveEmulatedReport> reports;
+  std::vector<ImuSample> samples;
+  std::uint64_t bytes = 0;
+  auto write = [&] {
+    for (const auto& r : reports) file.write(reinterpret_cast<const char*>(r.bytes.data()), r.bytes.size());
+    bytes += reports.size() * kGloveDataReportSize;
+    reports.clear();
+  };
+  for (std::int64_t k = 0; k < ticks; ++k) {
+    const TimeNs t = imu->next_nominal_time_ns();
+    samples.clear();
+    for (const sim::ImuReading& r : imu->next()) samples.push_back(r.sample);
+    if (auto s = emulator->tick(t, samples, reports); !s) return logger().error("{}", s.error().message), 1;
+    write();
+    progress.update(ns_to_seconds(t));
+  }
+  emulator->flush(reports);
+  write();
+  progress.finish();
+  file.close();
+  if (!file) return logger().error("writing {} failed", a.out), 1;
+  const GloveEmulatorStats& st = emulator->stats();
+  std::printf("wrote %s: %llu reports (%llu bytes), %lld ticks of %zu IMUs at %d Hz (%.1f s), seed %llu\n",
+              a.out.c_str(), static_cast<unsigned long long>(st.reports_sent), static_cast<unsigned long long>(bytes),
+              static_cast<long long>(ticks), imu->imu_count(), a.rate_hz, a.seconds,
+              static_cast<unsigned long long>(a.seed));
+  std::printf("faults: %llu dropped, %llu duplicated, %llu corrupted, %llu reordered, %llu stale samples, %llu "
+              "unpowered ticks, %llu boot(s); %llu saturated samples\n",
+              static_cast<unsigned long long>(st.dropped), static_cast<unsigned long long>(st.duplicated),
+              static_cast<unsigned long long>(st.corrupted), static_cast<unsigned long long>(st.reordered),
+              static_cast<unsigned long long>(st.stale_samples), static_cast<unsigned long long>(st.ticks_unpowered),
+              static_cast<unsigned long long>(st.boots), static_cast<unsigned long long>(st.saturated_samples));
+  return 0;
+}
+
+}  // namespace
+
+void add_glove_command(CLI::App& app, int& exit_code) {
+  CLI::App* glove = app.add_subcommand(
+      "glove",
+      "The USB HID IMU glove (7 IMUs at 100 Hz; protocol in docs/glove-hid-protocol.md): list devices, monitor a "
+      "glove or a capture file, or emulate one.");
+  glove->require_subcommand(1);
+  const auto hex = [](const std::string& s) { return check_hex_id(s); };
+
+  auto list = std::make_shared<ListArgs>();
+  CLI::App* list_cmd = glove->add_subcommand("list", "List HID devices with the glove's USB IDs (or all with --all).");
+  list_cmd->add_flag("--all", list->all, "List every HID device, not just gloves");
+  list_cmd->add_option("--vid", list->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
+  list_cmd->add_option("--pid", list->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
+  list_cmd->callback([list, &exit_code] { exit_code = run_list(*list); });
+
+  auto mon = std::make_shared<MonitorArgs>();
+  CLI::App* mon_cmd = glove->add_subcommand(
+      "monitor",
+      "Open a glove, decode its reports and print, every --interval, the report and sample rates, lost, duplicate, "
+      "late and undecodable reports, rejected samples, restarts and the clock alignment; at the end, per-IMU "
+      "statistics. Keeps going through unplugging and replugging. With --from-file, decodes a capture written by "
+      "'glove emulate' instead (rates are then per second of device time). Exit status 1 if no IMU data arrived.");
+  mon_cmd->add_option("--vid", mon->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
+  mon_cmd->add_option("--pid", mon->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
+  mon_cmd->add_option("--serial", mon->serial, "Open the glove with this USB serial number (e.g. left vs right)");
+  mon_cmd->add_option("--path", mon->path, "Open this HID device node (e.g. /dev/hidraw3) instead of searching");
+  mon_cmd->add_option("--seconds", mon->seconds, "Stop after this long, s (0: until Ctrl-C)")
+      ->check(CLI::Range(0.0, 7.0 * 24 * 3600))
+      ->capture_default_str();
+  mon_cmd->add_option("--interval", mon->interval_s, "Seconds between status lines")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
+  mon_cmd->add_option("--rate", mon->rate_hz, "Tick rate to assume until the glove's own is measured, Hz")
+      ->check(CLI::Range(1.0, static_cast<double>(kGloveMaxRateHz)))
+      ->capture_default_str();
+  mon_cmd->add_option("--from-file", mon->from_file, "Decode this capture file instead of a live glove")
+      ->check(CLI::ExistingFile);
+  mon_cmd->callback([mon, &exit_code] { exit_code = mon->from_file.empty() ? monitor_live(*mon) : monitor_file(*mon); });
+
+  auto emu = std::make_shared<EmulateArgs>();
+  CLI::App* emu_cmd = glove->add_subcommand(
+      "emulate",
+      "Simulate a hand wearing the glove (IMU simulator with datasheet noise) and write the exact HID input reports "
+      "the glove would send, back to back, to --out; 'proprio glove monitor --from-file' decodes it. Faults can be "
+      "injected; the same seed gives the same bytes.");
+  emu_cmd->add_option("--out", emu->out, "File to write (raw 64-byte reports)")->required();
+  emu_cmd->add_option("--seconds", emu->seconds, "Duration to emulate, s")
+      ->check(CLI::Range(0.0, 24.0 * 3600.0))
+      ->capture_default_str();
+  emu_cmd->add_option("--seed", emu->seed, "Random seed for the motion, the IMU noise and the faults")
+      ->capture_default_str();
+  emu_cmd->add_option("--subject", emu->subject, "Simulated subject 0-14")
+      ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
+      ->capture_default_str();
+  emu_cmd->add_option("--protocol", emu->protocol, "Hand motion: free-motion, pinch-grasp or wrist-sweep")
+      ->check(CLI::IsMember({"free-motion", "pinch-grasp", "wrist-sweep"}))
+      ->capture_default_str();
+  emu_cmd->add_option("--hand", emu->hand, "Which hand")->check(CLI::IsMember({"left", "right"}))->capture_default_str();
+  emu_cmd->add_option("--rate", emu->rate_hz, "IMU sample rate, Hz")
+      ->check(CLI::Range(1, static_cast<int>(kGloveMaxRateHz)))
+      ->capture_default_str();
+  emu_cmd->add_option("--clock-ppm", emu->clock_ppm, "Device crystal error, ppm (a real one is within ±100)")
+      ->check(CLI::Range(-1000.0, 1000.0))
+      ->capture_default_str();
+  emu_cmd->add_option("--start-timestamp-us", emu->start_timestamp_us,
+                      "Device µs counter at power-up; real firmware starts at 0, 4294000000 makes it wrap about 1 s in")
+      ->capture_default_str();
+  emu_cmd->add_option("--drop", emu->drop, "Probability that a report is lost")->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--duplicate", emu->duplicate, "Probability that a report is sent twice")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--corrupt", emu->corrupt, "Probability that a report has one bit flipped")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--reorder", emu->reorder, "Probability that a report is sent after the next one")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--stale", emu->stale, "Probability, per IMU and tick, that a sample repeats the last (stale)")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--unplug", emu->unplugs,
+                      "AT:FOR in seconds: the glove loses power at AT for FOR, then boots again (repeatable)")
+      ->check([](const std::string& s) { return check_unplug(s); });
+  emu_cmd->add_flag("--force", emu->force, "Overwrite an existing file");
+  emu_cmd->callback([emu, &exit_code] { exit_code = run_emulate(*emu); });
+}
+
 }  // namespace proprio::cli

@@ -531,52 +531,35 @@ CorrectionStats VistFilter::correct(std::span<const MarkerMeasurement> markers, 
   }
 
   if (use_constraints) {
-    const double sp2 = options_.joint_position_sigma_m * options_.joint_position_sigma_m;
+    // One row block per pseudo-measurement between two segments, noise sigma² I.
+    auto add_block = [&](int dim, std::size_t a, std::size_t b, double sigma) -> RowBlock& {
+      RowBlock& blk = blocks_.emplace_back();
+      blk.row = rows;
+      blk.dim = dim;
+      blk.seg_a = static_cast<int>(a);
+      blk.seg_b = static_cast<int>(b);
+      blk.Ha.setZero();
+      blk.Hb.setZero();
+      blk.R = Mat3::Identity() * sigma * sigma;
+      rows += dim;
+      return blk;
+    };
     for (const auto& c : model_.position_constraints) {
-      RowBlock b;
-      b.row = rows;
-      b.dim = 3;
-      b.seg_a = static_cast<int>(c.parent);
-      b.seg_b = static_cast<int>(c.child);
-      const Vec3 v = position_constraint_model(states_[c.parent], states_[c.child], c, &b.Ha, &b.Hb);
-      r_.segment<3>(rows) = -v;
-      b.R = Mat3::Identity() * sp2;
-      blocks_.push_back(b);
-      rows += 3;
+      RowBlock& b = add_block(3, c.parent, c.child, options_.joint_position_sigma_m);
+      r_.segment<3>(b.row) = -position_constraint_model(states_[c.parent], states_[c.child], c, &b.Ha, &b.Hb);
     }
-    const double sr2 = options_.joint_rotation_sigma * options_.joint_rotation_sigma;
     for (const auto& c : model_.rotation_constraints) {
-      RowBlock b;
-      b.row = rows;
-      b.dim = 1;
-      b.seg_a = static_cast<int>(c.parent);
-      b.seg_b = static_cast<int>(c.child);
+      RowBlock& b = add_block(1, c.parent, c.child, options_.joint_rotation_sigma);
       H1 Hp, Hc;
-      const double v = rotation_constraint_model(states_[c.parent], states_[c.child], c, &Hp, &Hc);
-      b.Ha.setZero();
-      b.Hb.setZero();
+      r_(b.row) = -rotation_constraint_model(states_[c.parent], states_[c.child], c, &Hp, &Hc);
       b.Ha.row(0) = Hp;
       b.Hb.row(0) = Hc;
-      r_(rows) = -v;
-      b.R(0, 0) = sr2;
-      blocks_.push_back(b);
-      rows += 1;
     }
-    const double sc2 = options_.scale_coupling_sigma * options_.scale_coupling_sigma;
     for (const auto& c : model_.scale_couplings) {
-      RowBlock b;
-      b.row = rows;
-      b.dim = 3;
-      b.seg_a = static_cast<int>(c.a);
-      b.seg_b = static_cast<int>(c.b);
-      b.Ha.setZero();
-      b.Hb.setZero();
+      RowBlock& b = add_block(3, c.a, c.b, options_.scale_coupling_sigma);
       b.Ha.block<3, 3>(0, kErrScale) = Mat3::Identity();
       b.Hb.block<3, 3>(0, kErrScale) = -Mat3::Identity();
-      r_.segment<3>(rows) = -(states_[c.a].scale - states_[c.b].scale);
-      b.R = Mat3::Identity() * sc2;
-      blocks_.push_back(b);
-      rows += 3;
+      r_.segment<3>(b.row) = -(states_[c.a].scale - states_[c.b].scale);
     }
     st.constraint_rows = static_cast<std::size_t>(rows) - 3 * st.markers_used;
   }

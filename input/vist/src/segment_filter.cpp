@@ -55,7 +55,7 @@ Result<VistModel> VistModel::build(const GloveDescription& glove, const HandShap
   const auto imus = glove.place_imus(nominal_shape, hand);
   for (std::size_t i = 0; i < imus.size(); ++i) {
     if (m.segment_index(imus[i].segment) >= 0) {
-      return Error(Errc::invalid_argument, "glove '" + glove.name + "': two IMUs on segment " +
+      return make_error(Errc::invalid_argument, "glove '" + glove.name + "': two IMUs on segment " +
                                                std::string(to_string(imus[i].segment)) +
                                                "; the VIST filter needs exactly one IMU per tracked segment");
     }
@@ -66,13 +66,13 @@ Result<VistModel> VistModel::build(const GloveDescription& glove, const HandShap
     s.q_segment_imu = imus[i].T_segment_imu.q;
     m.segments.push_back(s);
   }
-  if (m.segments.empty()) return Error(Errc::invalid_argument, "glove '" + glove.name + "' has no IMUs");
+  if (m.segments.empty()) return make_error(Errc::invalid_argument, "glove '" + glove.name + "' has no IMUs");
 
   m.placed_nominal = glove.place_markers(nominal_shape, hand);
   for (const auto& pm : m.placed_nominal) {
     const int k = m.segment_index(pm.segment);
     if (k < 0) {
-      return Error(Errc::invalid_argument, "glove '" + glove.name + "': marker " + std::to_string(pm.index) +
+      return make_error(Errc::invalid_argument, "glove '" + glove.name + "': marker " + std::to_string(pm.index) +
                                                " sits on " + std::string(to_string(pm.segment)) +
                                                ", which has no IMU; VIST tracks only segments that carry an IMU");
     }
@@ -143,13 +143,13 @@ std::string VistModel::describe() const {
 Status FilterOptions::validate() const {
   auto positive = [](double v, const char* name) -> Status {
     if (!(v > 0.0) || !std::isfinite(v)) {
-      return Error(Errc::invalid_argument, std::string("VIST filter option ") + name + " must be > 0");
+      return make_error(Errc::invalid_argument, std::string("VIST filter option ") + name + " must be > 0");
     }
     return {};
   };
   auto non_negative = [](double v, const char* name) -> Status {
     if (!(v >= 0.0) || !std::isfinite(v)) {
-      return Error(Errc::invalid_argument, std::string("VIST filter option ") + name + " must be >= 0");
+      return make_error(Errc::invalid_argument, std::string("VIST filter option ") + name + " must be >= 0");
     }
     return {};
   };
@@ -174,8 +174,8 @@ Status FilterOptions::validate() const {
                   positive(marker_gate_chi2, "marker_gate_chi2"), positive(min_scale, "min_scale")}) {
     if (!st) return st;
   }
-  if (!(max_scale > min_scale)) return Error(Errc::invalid_argument, "VIST filter: max_scale must exceed min_scale");
-  if (health_check_every < 1) return Error(Errc::invalid_argument, "VIST filter: health_check_every must be >= 1");
+  if (!(max_scale > min_scale)) return make_error(Errc::invalid_argument, "VIST filter: max_scale must exceed min_scale");
+  if (health_check_every < 1) return make_error(Errc::invalid_argument, "VIST filter: health_check_every must be >= 1");
   return {};
 }
 
@@ -202,7 +202,7 @@ std::string FilterOptions::describe() const {
 
 Result<VistFilter> VistFilter::create(VistModel model, FilterOptions options) {
   if (auto st = options.validate(); !st) return st.error();
-  if (model.segments.empty()) return Error(Errc::invalid_argument, "VIST filter: the model has no segments");
+  if (model.segments.empty()) return make_error(Errc::invalid_argument, "VIST filter: the model has no segments");
   return VistFilter(std::move(model), options);
 }
 
@@ -239,11 +239,11 @@ VistFilter::VistFilter(VistModel model, FilterOptions options)
 
 Status VistFilter::initialize(TimeNs t_ns, std::span<const SegmentState> states) {
   if (states.size() != states_.size()) {
-    return Error(Errc::invalid_argument, "VIST filter: initialize needs " + std::to_string(states_.size()) +
+    return make_error(Errc::invalid_argument, "VIST filter: initialize needs " + std::to_string(states_.size()) +
                                              " segment states, got " + std::to_string(states.size()));
   }
   for (const auto& s : states) {
-    if (!state_finite(s)) return Error(Errc::invalid_argument, "VIST filter: initial state is not finite");
+    if (!state_finite(s)) return make_error(Errc::invalid_argument, "VIST filter: initial state is not finite");
   }
   std::copy(states.begin(), states.end(), states_.begin());
   for (auto& s : states_) {
@@ -276,12 +276,12 @@ Status VistFilter::initialize(TimeNs t_ns, std::span<const SegmentState> states)
 Status VistFilter::reinitialize_pose(TimeNs t_ns, std::span<const SegmentState> states) {
   if (!initialized_) return initialize(t_ns, states);
   if (states.size() != states_.size()) {
-    return Error(Errc::invalid_argument, "VIST filter: reinitialize_pose needs one state per segment");
+    return make_error(Errc::invalid_argument, "VIST filter: reinitialize_pose needs one state per segment");
   }
   flush();
   const auto& i = options_.initial;
   for (std::size_t k = 0; k < states_.size(); ++k) {
-    if (!state_finite(states[k])) return Error(Errc::invalid_argument, "VIST filter: state is not finite");
+    if (!state_finite(states[k])) return make_error(Errc::invalid_argument, "VIST filter: state is not finite");
     states_[k].p_imu_in_world = states[k].p_imu_in_world;
     states_[k].v_imu_in_world = states[k].v_imu_in_world;
     states_[k].q_world_imu = states[k].q_world_imu.normalized();

@@ -24,26 +24,26 @@ Quat heading(double psi) { return Quat(Eigen::AngleAxisd(psi, Vec3::UnitY())); }
 Status VistTrackerOptions::validate() const {
   if (!(nominal_hand_length_m > 0.1 && nominal_hand_length_m < 0.3) ||
       !(nominal_hand_width_m > 0.05 && nominal_hand_width_m < 0.2)) {
-    return Error(Errc::invalid_argument, "VIST tracker: nominal hand length/width must be adult sizes in metres");
+    return make_error(Errc::invalid_argument, "VIST tracker: nominal hand length/width must be adult sizes in metres");
   }
   if (auto st = filter.validate(); !st) return st;
   if (auto st = stereo.validate(); !st) return st;
   if (auto st = correspondence.validate(); !st) return st;
   if (!(max_frame_latency_s > 0.0 && max_frame_latency_s <= 2.0)) {
-    return Error(Errc::invalid_argument, "VIST tracker: max_frame_latency_s must be in (0, 2] s");
+    return make_error(Errc::invalid_argument, "VIST tracker: max_frame_latency_s must be in (0, 2] s");
   }
   if (min_acquisition_points < 3 || min_acquisition_matches < 3) {
-    return Error(Errc::invalid_argument, "VIST tracker: acquisition needs at least 3 points and 3 matches");
+    return make_error(Errc::invalid_argument, "VIST tracker: acquisition needs at least 3 points and 3 matches");
   }
   if (acquisition_heading_steps < 1 || acquisition_heading_steps > 360) {
-    return Error(Errc::invalid_argument, "VIST tracker: acquisition_heading_steps must be in [1, 360]");
+    return make_error(Errc::invalid_argument, "VIST tracker: acquisition_heading_steps must be in [1, 360]");
   }
-  if (!(lost_after_s > 0.0)) return Error(Errc::invalid_argument, "VIST tracker: lost_after_s must be > 0");
+  if (!(lost_after_s > 0.0)) return make_error(Errc::invalid_argument, "VIST tracker: lost_after_s must be > 0");
   if (!(vision_only_accel_density > 0.0) || !(vision_only_gyro_density > 0.0)) {
-    return Error(Errc::invalid_argument, "VIST tracker: vision-only motion-model densities must be > 0");
+    return make_error(Errc::invalid_argument, "VIST tracker: vision-only motion-model densities must be > 0");
   }
   if (!use_imu && !use_vision) {
-    return Error(Errc::invalid_argument, "VIST tracker: use_imu and use_vision cannot both be off");
+    return make_error(Errc::invalid_argument, "VIST tracker: use_imu and use_vision cannot both be off");
   }
   return {};
 }
@@ -86,7 +86,7 @@ Result<VistTracker> VistTracker::create(const GloveDescription& glove, VistTrack
   auto model = VistModel::build(glove, *shape, options.hand);
   if (!model) return model.error();
   if (model->segment_index(HandJoint::wrist) < 0) {
-    return Error(Errc::invalid_argument, "glove '" + glove.name + "': VIST needs an IMU on the dorsum (wrist segment)");
+    return make_error(Errc::invalid_argument, "glove '" + glove.name + "': VIST needs an IMU on the dorsum (wrist segment)");
   }
   const std::size_t marker_count = model->markers.size();
   auto filter = VistFilter::create(std::move(*model), options.filter);

@@ -156,7 +156,7 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
                                   const vist::VistTrackerOptions& base_options) {
   if (spec.mode == FrameMode::images && spec.challenge != Challenge::none &&
       spec.challenge != Challenge::dropped_frames && spec.challenge != Challenge::distractors) {
-    return Error(Errc::unsupported, "VIST evaluation: the " + std::string(to_string(spec.challenge)) +
+    return make_error(Errc::unsupported, "VIST evaluation: the " + std::string(to_string(spec.challenge)) +
                                         " challenge hides markers by identity, which only the detections mode can do");
   }
   auto subject = sim::sim_subject(spec.subject);

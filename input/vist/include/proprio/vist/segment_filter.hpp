@@ -134,7 +134,7 @@ struct SegmentState {
   }
   // The segment frame (its joint) in the world: origin where the nominal origin maps.
   Pose T_world_segment(const Vec3& p_imu_in_segment) const {
-    return Pose(q_world_segment(), point_in_world(-p_imu_in_segment));
+    return Pose{q_world_segment(), point_in_world(-p_imu_in_segment)};
   }
 };
 

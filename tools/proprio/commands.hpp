@@ -12,6 +12,10 @@ void add_vist_commands(CLI::App& app, int& exit_code);
 void add_calibrate_command(CLI::App& app, int& exit_code);
 // `glove emulate|monitor|list`: the USB HID IMU glove.
 void add_glove_command(CLI::App& app, int& exit_code);
+// `sim-glove`: simulated stretch-glove sessions written as a training dataset.
+void add_sim_glove_command(CLI::App& app, int& exit_code);
+// `stretch-board emulate|monitor|list`: the stretch glove's USB HID read-out board.
+void add_stretch_board_command(CLI::App& app, int& exit_code);
 // `layer install|uninstall|status|init-config` and `xr-probe`: built when the
 // OpenXR layer is part of the build (PROPRIO_HAVE_OPENXR_LAYER).
 void add_layer_commands(CLI::App& app, int& exit_code);

@@ -1,0 +1,4 @@
+#include "commands.hpp"
+namespace proprio::cli {
+void add_sim_glove_command(CLI::App&, int&) {}
+}

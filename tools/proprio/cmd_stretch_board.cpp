@@ -1,0 +1,4 @@
+#include "commands.hpp"
+namespace proprio::cli {
+void add_stretch_board_command(CLI::App&, int&) {}
+}

@@ -43,10 +43,10 @@ TEST(LayerConfig, OffsetsAreMetresAndDegrees) {
 }
 
 TEST(LayerConfig, ErrorsNameTheFileTheSourceAndTheChoices) {
-  auto bad_type = parse_layer_config("[[source]]\ntype = \"vist\"\n", "layer.toml");
+  auto bad_type = parse_layer_config("[[source]]\ntype = \"glove9\"\n", "layer.toml");
   ASSERT_FALSE(bad_type.ok());
   EXPECT_TRUE(contains(bad_type.error().message, "layer.toml")) << bad_type.error().message;
-  EXPECT_TRUE(contains(bad_type.error().message, "sim, replay")) << bad_type.error().message;
+  EXPECT_TRUE(contains(bad_type.error().message, "sim, replay, vist")) << bad_type.error().message;
 
   auto no_path = parse_layer_config("[[source]]\ntype = \"replay\"\n", "layer.toml");
   ASSERT_FALSE(no_path.ok());
@@ -76,4 +76,20 @@ TEST(LayerConfig, DefaultPathFollowsEnvironment) {
   ::unsetenv("XDG_CONFIG_HOME");
   ::setenv("HOME", "/home/u", 1);
   EXPECT_EQ(default_layer_config_path(), "/home/u/.config/proprio/layer.toml");
+}
+
+TEST(LayerConfig, VistSourcesReplayASessionForTheRightHandByDefault) {
+  auto c = parse_layer_config("[[source]]\ntype = \"vist\"\npath = \"/data/vist.prec\"\nloop = false\n", "v.toml");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  const auto& s = c->sources[0];
+  EXPECT_EQ(s.type, SourceType::vist);
+  EXPECT_EQ(s.space, ReferenceSpace::local);
+  ASSERT_EQ(s.hands.size(), 1u);
+  EXPECT_EQ(s.hands[0], Handedness::right);
+  EXPECT_FALSE(s.loop);
+  EXPECT_TRUE(contains(s.describe(), "vist source"));
+
+  auto missing = parse_layer_config("[[source]]\ntype = \"vist\"\n", "v.toml");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_TRUE(contains(missing.error().message, "VIST session")) << missing.error().message;
 }

@@ -1,4 +1,5 @@
 // proprio bench vist: the VIST evaluation protocol on simulated subjects.
+// proprio sim-vist: one simulated subject's session, recorded for replay.
 // proprio track vist: the VIST tracker on a recorded session.
 #include <algorithm>
 #include <cstdio>
@@ -184,11 +185,158 @@ int run_bench_vist(const BenchVistArgs& a) {
   return failures == 0 ? 0 : 1;
 }
 
+struct SimVistArgs {
+  int subject = 3;
+  double seconds = 60.0;
+  std::uint64_t seed = 1;
+  std::string challenge = "none";
+  std::string mode = "detections";
+  std::string glove;
+  std::string out;
+  bool force = false;
+};
+
+Result<GloveDescription> load_glove(const std::string& path) {
+  if (path.empty()) return GloveDescription::vist_default();
+  return GloveDescription::load(path);
+}
+
+int run_sim_vist(const SimVistArgs& a) {
+  auto glove = load_glove(a.glove);
+  if (!glove) {
+    std::fprintf(stderr, "error: %s\n", glove.error().message.c_str());
+    return 2;
+  }
+  vist_eval::SessionSpec spec;
+  spec.subject = a.subject;
+  spec.duration_s = a.seconds;
+  spec.seed = a.seed;
+  spec.mode = *vist_eval::parse_frame_mode(a.mode);
+  for (auto c : {Challenge::none, Challenge::occlude_half, Challenge::out_of_view, Challenge::distractors,
+                 Challenge::dropped_frames, Challenge::imu_unplug}) {
+    if (vist_eval::to_string(c) == a.challenge) spec.challenge = c;
+  }
+  spec.record_path = a.out;
+  spec.overwrite_record = a.force;
+  std::printf("Simulating subject %d wearing '%s' for %.0f s (%s, challenge %s) -> %s\n", a.subject,
+              glove->name.c_str(), a.seconds, a.mode.c_str(), a.challenge.c_str(), a.out.c_str());
+  auto r = vist_eval::run_session(*glove, spec);
+  if (!r) {
+    std::fprintf(stderr, "error: %s\n", r.error().message.c_str());
+    return 1;
+  }
+  std::printf("live tracking: keypoint error mean %.2f mm (p95 %.2f), all 26 joints %.2f mm; %llu frames fused\n",
+              r->keypoints.mean_mm, r->keypoints.p95_mm, r->all_joints.mean_mm,
+              static_cast<unsigned long long>(r->stats.frames_fused));
+  std::printf("Replay it with: proprio track vist --session %s\n", a.out.c_str());
+  return 0;
+}
+
+struct TrackVistArgs {
+  std::string session;
+  std::string out;
+  bool force = false;
+  double warmup_s = 5.0;
+  bool json = false;
+};
+
+int run_track_vist(const TrackVistArgs& a) {
+  vist_eval::TrackSessionOptions o;
+  o.warmup_s = a.warmup_s;
+  o.output_path = a.out;
+  o.overwrite_output = a.force;
+  auto r = vist_eval::track_session(a.session, o);
+  if (!r) {
+    std::fprintf(stderr, "error: %s\n", r.error().message.c_str());
+    return 1;
+  }
+  const double rt = r->tracker_seconds > 0.0 ? r->session_seconds / r->tracker_seconds : 0.0;
+  nlohmann::json j = {{"session", a.session},
+                      {"glove", r->info.glove.name},
+                      {"hand", std::string(to_string(r->info.hand))},
+                      {"session_seconds", r->session_seconds},
+                      {"imu_samples", r->imu_samples},
+                      {"stereo_frames", r->stereo_frames},
+                      {"poses", r->poses},
+                      {"frames_fused", r->stats.frames_fused},
+                      {"acquisitions", r->stats.acquisitions},
+                      {"reacquisitions", r->stats.reacquisitions},
+                      {"skipped_records", r->skipped_records},
+                      {"recording_end", to_string(r->recording.end)},
+                      {"tracker_realtime_factor", rt},
+                      {"scored", r->scored}};
+  if (r->scored) {
+    j["keypoints"] = to_json(r->keypoints);
+    j["all_joints"] = to_json(r->all_joints);
+    j["keypoint_mean_mm"] = r->keypoint_mean_mm;
+  }
+  if (a.json) {
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%s: %.1f s, %llu IMU samples, %llu stereo frames (%llu fused), %llu poses, %.0fx real time\n",
+              a.session.c_str(), r->session_seconds, static_cast<unsigned long long>(r->imu_samples),
+              static_cast<unsigned long long>(r->stereo_frames), static_cast<unsigned long long>(r->stats.frames_fused),
+              static_cast<unsigned long long>(r->poses), rt);
+  if (r->recording.end != RecordingEnd::clean || r->skipped_records > 0) {
+    std::printf("recording: %s, %llu damaged records skipped (%s)\n", to_string(r->recording.end),
+                static_cast<unsigned long long>(r->skipped_records), r->recording.detail.c_str());
+  }
+  if (r->scored) {
+    std::printf("vs ground truth (after %.0f s): keypoints mean %.2f mm, p95 %.2f mm, PCK@20 %.1f%%; all 26 joints "
+                "%.2f mm\n",
+                a.warmup_s, r->keypoints.mean_mm, r->keypoints.p95_mm, 100 * r->keypoints.pck20,
+                r->all_joints.mean_mm);
+  } else {
+    std::printf("no ground truth in the session: nothing to score\n");
+  }
+  if (!a.out.empty()) std::printf("tracked hand written to %s (proprio replay %s --summary)\n", a.out.c_str(), a.out.c_str());
+  return 0;
+}
+
+const std::vector<std::string> kChallengeNames = {"none", "occlude_half", "out_of_view", "distractors",
+                                                  "dropped_frames", "imu_unplug"};
+
 }  // namespace
 
 void add_vist_commands(CLI::App& app, int& exit_code) {
-  auto* bench = app.add_subcommand("bench", "Benchmarks that measure accuracy on simulated data");
-  bench->require_subcommand(1);
+  auto sargs = std::make_shared<SimVistArgs>();
+  auto* simv = app.add_subcommand(
+      "sim-vist",
+      "Simulate a subject wearing the VIST glove in front of a head-mounted stereo camera and record the session\n"
+      "(IMU samples, stereo marker detections, camera poses, ground truth and the live tracker output).");
+  simv->add_option("--subject", sargs->subject, "simulated subject (0-14)")
+      ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
+      ->capture_default_str();
+  simv->add_option("--seconds", sargs->seconds, "session length")->check(CLI::Range(1.0, 7200.0))->capture_default_str();
+  simv->add_option("--seed", sargs->seed, "seed of the simulation")->capture_default_str();
+  simv->add_option("--challenge", sargs->challenge, "what goes wrong during the session")
+      ->check(CLI::IsMember(kChallengeNames))
+      ->capture_default_str();
+  simv->add_option("--mode", sargs->mode, "detections: simulated blob centroids; images: rendered images + detector")
+      ->check(CLI::IsMember({"detections", "images"}))
+      ->capture_default_str();
+  simv->add_option("--glove", sargs->glove, "glove description TOML (default: the thesis glove)");
+  simv->add_option("--out", sargs->out, "session recording to write")->required();
+  simv->add_flag("--force", sargs->force, "overwrite --out if it exists");
+  simv->callback([sargs, &exit_code] { exit_code = run_sim_vist(*sargs); });
+
+  auto* track = subcommand_group(app, "track", "Run a tracker on recorded sensor data");
+  auto targs = std::make_shared<TrackVistArgs>();
+  auto* tv = track->add_subcommand(
+      "vist",
+      "Replay a recorded VIST session (from 'proprio sim-vist' or a live VIST source) through the tracker,\n"
+      "in the order the data arrived; score it against the session's ground truth when it has one.");
+  tv->add_option("--session", targs->session, "VIST session recording")->required()->check(CLI::ExistingFile);
+  tv->add_option("--out", targs->out, "write the tracked hand (and the ground truth) to this recording");
+  tv->add_flag("--force", targs->force, "overwrite --out if it exists");
+  tv->add_option("--warmup", targs->warmup_s, "seconds from the start not scored (acquisition, calibration)")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
+  tv->add_flag("--json", targs->json, "print the result as JSON");
+  tv->callback([targs, &exit_code] { exit_code = run_track_vist(*targs); });
+
+  auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
   auto args = std::make_shared<BenchVistArgs>();
   auto* vist = bench->add_subcommand(
       "vist",

@@ -3,10 +3,21 @@
 
 namespace proprio::cli {
 
+// A parent command several files add to (`bench vist`, `bench glove`, ...):
+// the existing one, or a new one that requires a subcommand.
+inline CLI::App* subcommand_group(CLI::App& app, const std::string& name, const std::string& description) {
+  for (CLI::App* sub : app.get_subcommands({})) {
+    if (sub->get_name() == name) return sub;
+  }
+  CLI::App* sub = app.add_subcommand(name, description);
+  sub->require_subcommand(1);
+  return sub;
+}
+
 // Each registers its subcommand; the callback runs it and sets the exit code.
 void add_sim_hand_command(CLI::App& app, int& exit_code);
 void add_replay_command(CLI::App& app, int& exit_code);
-// `track vist` and `bench vist`.
+// `sim-vist`, `track vist` and `bench vist`.
 void add_vist_commands(CLI::App& app, int& exit_code);
 // `calibrate stereo`.
 void add_calibrate_command(CLI::App& app, int& exit_code);

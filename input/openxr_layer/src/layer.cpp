@@ -29,6 +29,7 @@
 #include "proprio/openxr_layer/loader_interfaces.hpp"
 #include "proprio/openxr_layer/xr_ext.hpp"
 #include "proprio/sim/sim_hand_source.hpp"
+#include "proprio/vist/vist_hand_source.hpp"
 
 namespace proprio::openxr_layer {
 namespace {
@@ -151,6 +152,23 @@ XrReferenceSpaceType to_xr(ReferenceSpace s) {
   return XR_REFERENCE_SPACE_TYPE_LOCAL;
 }
 
+// A VIST tracker fed by a recorded session replayed in real time.
+Result<std::unique_ptr<HandSource>> make_vist_source(const SourceConfig& sc, const LayerConfig& config) {
+  auto session = vist::VistSessionReader::open(sc.path);
+  if (!session) return session.error();
+  vist::VistHandSourceOptions o;
+  o.tracker.hand = session->info().hand;
+  o.tracker.nominal_hand_length_m = session->info().nominal_hand_length_m;
+  o.tracker.nominal_hand_width_m = session->info().nominal_hand_width_m;
+  o.history.max_prediction_ns = config.max_prediction_ns;
+  auto source = vist::VistHandSource::create(session->info().glove, o);
+  if (!source) return source.error();
+  vist::VistSessionPlayerOptions po;
+  po.loop = sc.loop;
+  if (auto st = (*source)->play_session(sc.path, po); !st) return st.error();
+  return std::unique_ptr<HandSource>(std::move(*source));
+}
+
 // Loads the layer config and starts its sources. Failures are logged and
 // leave the instance without sources: the app then sees no hand tracking.
 void start_sources(Instance& inst) {
@@ -177,6 +195,13 @@ void start_sources(Instance& inst) {
       auto s = sim::SimHandSource::create(o);
       if (!s) {
         logger().error("Proprio layer: {}: sim source: {}", inst.config.origin, s.error().message);
+        continue;
+      }
+      source = std::move(*s);
+    } else if (sc.type == SourceType::vist) {
+      auto s = make_vist_source(sc, inst.config);
+      if (!s) {
+        logger().error("Proprio layer: {}: vist source: {}", inst.config.origin, s.error().message);
         continue;
       }
       source = std::move(*s);

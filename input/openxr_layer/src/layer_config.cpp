@@ -10,7 +10,14 @@
 
 namespace proprio::openxr_layer {
 
-std::string_view to_string(SourceType t) noexcept { return t == SourceType::sim ? "sim" : "replay"; }
+std::string_view to_string(SourceType t) noexcept {
+  switch (t) {
+    case SourceType::sim: return "sim";
+    case SourceType::replay: return "replay";
+    case SourceType::vist: return "vist";
+  }
+  return "unknown";
+}
 
 std::string_view to_string(ReferenceSpace s) noexcept {
   switch (s) {
@@ -98,7 +105,7 @@ Result<Vec3> vec3(const Config& c, std::string_view key) {
 Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
   const std::string where = c.source_name() + ": [[source]] #" + std::to_string(index + 1);
   SourceConfig s;
-  auto type = choose<SourceType>(c, "type", "", {{"sim", SourceType::sim}, {"replay", SourceType::replay}});
+  auto type = choose<SourceType>(c, "type", "", {{"sim", SourceType::sim}, {"replay", SourceType::replay}, {"vist", SourceType::vist}});
   if (!type) return type.error().with_context(where);
   s.type = *type;
   auto space = choose<ReferenceSpace>(c, "space", s.type == SourceType::sim ? "view" : "local",
@@ -144,11 +151,16 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
     s.rate_hz = *rate;
   } else {
     auto path = c.get_string("path");
-    if (!path) return path.error().with_context(where + " (a replay source needs the recording's path)");
+    if (!path) {
+      return path.error().with_context(where + (s.type == SourceType::vist
+                                                    ? " (a vist source needs a VIST session recording's path)"
+                                                    : " (a replay source needs the recording's path)"));
+    }
     s.path = *path;
     auto loop = c.get_bool_or("loop", true);
     if (!loop) return loop.error().with_context(where);
     s.loop = *loop;
+    if (s.type == SourceType::vist && !c.contains("hands")) s.hands = {Handedness::right};
   }
   return s;
 }

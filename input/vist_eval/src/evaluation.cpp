@@ -12,6 +12,7 @@
 #include "proprio/sim/stereo_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/marker_detection.hpp"
+#include "proprio/vist/vist_session.hpp"
 
 namespace proprio::vist_eval {
 namespace {
@@ -218,6 +219,17 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
   auto tracker = vist::VistTracker::create(glove, to);
   if (!tracker) return tracker.error();
   const vist::VistModel& model = tracker->model();
+  std::optional<vist::VistSessionWriter> recorder;
+  if (!spec.record_path.empty()) {
+    vist::VistSessionInfo info;
+    info.glove = glove;
+    info.hand = spec.hand;
+    info.nominal_hand_length_m = to.nominal_hand_length_m;
+    info.nominal_hand_width_m = to.nominal_hand_width_m;
+    auto w = vist::VistSessionWriter::create(spec.record_path, info, spec.overwrite_record);
+    if (!w) return w.error();
+    recorder.emplace(std::move(*w));
+  }
   const auto scale_truth = true_scales(model, glove, *shape, spec.hand);
   std::vector<Quat> q_imu_segment_truth;
   for (const auto& seg : model.segments) {
@@ -318,6 +330,13 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
       const auto c0 = Clock::now();
       tracker->add_stereo_frame(it->capture, it->frame.cameras[0], it->frame.cameras[1], it->T_world_leftcam);
       tracker_s += seconds_since(c0);
+      if (recorder) {
+        if (auto st = recorder->write_stereo_frame(it->capture, it->frame.cameras[0], it->frame.cameras[1],
+                                                   it->T_world_leftcam);
+            !st) {
+          return st.error();
+        }
+      }
       // Consistency at the frame's capture time, while the core is there.
       const auto& lf = tracker->last_frame();
       if (tracker->initialized() && lf.capture_time_ns == it->capture && lf.correction.applied &&
@@ -358,6 +377,9 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
       ts.sample = r.sample;
       ts.saturated = r.accel_saturated || r.gyro_saturated;
       new_pose = tracker->add_imu(ts) || new_pose;
+      if (recorder) {
+        if (auto st = recorder->write_imu(ts); !st) return st.error();
+      }
     }
     tracker_s += seconds_since(c1);
     if (!tracker->initialized()) continue;
@@ -390,6 +412,10 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
     if (!new_pose) continue;
     const HandPose& out = tracker->pose();
     const auto truth = truth_motion.sample(out.time_ns);
+    if (recorder) {
+      if (auto st = recorder->write_ground_truth(truth.pose); !st) return st.error();
+      if (auto st = recorder->write_output(out); !st) return st.error();
+    }
     std::array<double, 4> e{};
     for (std::size_t i = 0; i < 4; ++i) {
       e[i] = 1e3 * (out.joint(kKeypoints[i]).p - truth.pose.joint(kKeypoints[i]).p).norm();
@@ -408,6 +434,9 @@ Result<SessionResult> run_session(const GloveDescription& glove, const SessionSp
     }
     ++kp_n;
     for (double je : joint_position_errors(out, truth.pose)) joint_err.push_back(static_cast<float>(1e3 * je));
+  }
+  if (recorder) {
+    if (auto st = recorder->close(); !st) return st.error();
   }
   res.wall_seconds = seconds_since(t0);
   res.tracker_seconds = tracker_s;
@@ -456,6 +485,114 @@ Aggregate aggregate(std::string name, const std::vector<SessionResult>& sessions
   a.realtime_factor = wall_s > 0.0 ? sim_s / wall_s : 0.0;
   a.tracker_realtime_factor = trk_s > 0.0 ? sim_s / trk_s : 0.0;
   return a;
+}
+
+
+Result<TrackSessionResult> track_session(const std::filesystem::path& session, const TrackSessionOptions& options) {
+  auto reader = vist::VistSessionReader::open(session);
+  if (!reader) return reader.error();
+  TrackSessionResult res;
+  res.info = reader->info();
+  vist::VistTrackerOptions to = options.tracker;
+  to.hand = res.info.hand;
+  to.nominal_hand_length_m = res.info.nominal_hand_length_m;
+  to.nominal_hand_width_m = res.info.nominal_hand_width_m;
+  auto tracker = vist::VistTracker::create(res.info.glove, to);
+  if (!tracker) return tracker.error().with_context(session.string());
+
+  std::optional<vist::VistSessionWriter> out;
+  if (!options.output_path.empty()) {
+    auto w = vist::VistSessionWriter::create(options.output_path, res.info, options.overwrite_output);
+    if (!w) return w.error();
+    out.emplace(std::move(*w));
+  }
+  struct Output {
+    TimeNs t;
+    std::array<Vec3, kHandJointCount> p;
+  };
+  std::vector<Output> outputs;
+  std::vector<Output> truths;
+  std::optional<TimeNs> first_imu, last_imu;
+  for (;;) {
+    auto item = reader->next();
+    if (!item) return item.error().with_context(session.string());
+    if (!*item) break;
+    if (auto* imu = std::get_if<vist::TimedImuSample>(&**item)) {
+      ++res.imu_samples;
+      if (!first_imu) first_imu = imu->time_ns;
+      last_imu = imu->time_ns;
+      const auto c0 = Clock::now();
+      const bool fresh = tracker->add_imu(*imu);
+      res.tracker_seconds += seconds_since(c0);
+      if (!fresh) continue;
+      const HandPose& pose = tracker->pose();
+      ++res.poses;
+      if (pose.active) {
+        Output o{pose.time_ns, {}};
+        for (std::size_t j = 0; j < kHandJointCount; ++j) o.p[j] = pose.T_world_joint[j].p;
+        outputs.push_back(o);
+      }
+      if (out) {
+        if (auto st = out->write_output(pose); !st) return st.error();
+      }
+    } else if (auto* f = std::get_if<vist::VistStereoFrame>(&**item)) {
+      ++res.stereo_frames;
+      const auto c0 = Clock::now();
+      tracker->add_stereo_frame(f->capture_time_ns, f->left, f->right, f->T_world_leftcam);
+      res.tracker_seconds += seconds_since(c0);
+    } else if (auto* gt = std::get_if<vist::VistGroundTruth>(&**item)) {
+      ++res.ground_truth_poses;
+      Output o{gt->pose.time_ns, {}};
+      for (std::size_t j = 0; j < kHandJointCount; ++j) o.p[j] = gt->pose.T_world_joint[j].p;
+      truths.push_back(o);
+      if (out) {
+        if (auto st = out->write_ground_truth(gt->pose); !st) return st.error();
+      }
+    }
+  }
+  if (out) {
+    if (auto st = out->close(); !st) return st.error();
+  }
+  res.skipped_records = reader->skipped_records();
+  res.recording = reader->summary();
+  res.stats = tracker->stats();
+  if (first_imu) res.session_seconds = 1e-9 * static_cast<double>(*last_imu - *first_imu);
+
+  // Score against the truth, linearly interpolated between samples up to 50 ms apart.
+  std::sort(truths.begin(), truths.end(), [](const Output& a, const Output& b) { return a.t < b.t; });
+  const TimeNs warmup_end = first_imu ? *first_imu + static_cast<TimeNs>(options.warmup_s * 1e9) : 0;
+  std::vector<float> kp_err, joint_err;
+  std::array<double, 4> kp_sum{};
+  for (const Output& o : outputs) {
+    if (o.t < warmup_end) continue;
+    auto it = std::lower_bound(truths.begin(), truths.end(), o.t, [](const Output& a, TimeNs t) { return a.t < t; });
+    std::array<Vec3, kHandJointCount> truth;
+    if (it != truths.end() && it->t == o.t) {
+      truth = it->p;
+    } else if (it != truths.end() && it != truths.begin() && it->t - std::prev(it)->t <= 50 * kNsPerMillisecond) {
+      const Output& a = *std::prev(it);
+      const double w = static_cast<double>(o.t - a.t) / static_cast<double>(it->t - a.t);
+      for (std::size_t j = 0; j < kHandJointCount; ++j) truth[j] = (1.0 - w) * a.p[j] + w * it->p[j];
+    } else {
+      continue;
+    }
+    for (std::size_t i = 0; i < 4; ++i) {
+      const double e = 1e3 * (o.p[index_of(kKeypoints[i])] - truth[index_of(kKeypoints[i])]).norm();
+      kp_err.push_back(static_cast<float>(e));
+      kp_sum[i] += e;
+    }
+    for (std::size_t j = 0; j < kHandJointCount; ++j) {
+      joint_err.push_back(static_cast<float>(1e3 * (o.p[j] - truth[j]).norm()));
+    }
+  }
+  const std::size_t n = kp_err.size() / 4;
+  if (n > 0) {
+    res.scored = true;
+    for (std::size_t i = 0; i < 4; ++i) res.keypoint_mean_mm[i] = kp_sum[i] / static_cast<double>(n);
+    res.keypoints = summarize(kp_err);
+    res.all_joints = summarize(joint_err);
+  }
+  return res;
 }
 
 }  // namespace proprio::vist_eval

@@ -16,7 +16,7 @@
 
 namespace proprio::openxr_layer {
 
-enum class SourceType { sim, replay };
+enum class SourceType { sim, replay, vist };
 enum class ReferenceSpace { view, local, stage };
 // What to do when the runtime implements XR_EXT_hand_tracking itself.
 enum class RuntimeHandTracking {
@@ -44,6 +44,8 @@ struct SourceConfig {
   double rate_hz = 90.0;  // how often the simulated tracker produces a pose
 
   // replay: a recorded session, played from when the layer starts.
+  // vist: a recorded VIST session (proprio sim-vist, or a live recording)
+  // replayed through the VIST tracker in real time.
   std::string path;
   bool loop = true;
 

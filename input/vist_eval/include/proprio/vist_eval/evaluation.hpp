@@ -10,6 +10,7 @@
 // that arrive camera_latency_s after their capture. The keypoints are the
 // thesis's: dorsum (the palm joint), thumb, index and middle fingertips.
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -18,6 +19,7 @@
 #include "proprio/core/glove_description.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/sim/hand_motion.hpp"
+#include "proprio/vist/vist_session.hpp"
 #include "proprio/vist/vist_tracker.hpp"
 
 namespace proprio::vist_eval {
@@ -57,6 +59,11 @@ struct SessionSpec {
   int distractor_count = 20;
   // Calibration accuracy is read at this time (the issue: "after 30 s").
   double calibration_check_s = 30.0;
+  // When set, the session is also recorded there (vist_session.hpp): the
+  // sensor data as the tracker received it, ground truth and the live output,
+  // for `proprio track vist --session`.
+  std::filesystem::path record_path;
+  bool overwrite_record = false;
 };
 
 struct ErrorSummary {
@@ -116,6 +123,30 @@ struct Aggregate {
   std::size_t acquisitions_failed = 0;
 };
 Aggregate aggregate(std::string name, const std::vector<SessionResult>& sessions);
+
+// Replays a recorded VIST session (vist_session.hpp) through a fresh tracker
+// in file (arrival) order, as `proprio track vist --session` does. Scores the
+// output against the file's ground truth when it has one, and writes the
+// output (with the ground truth) to output_path when set.
+struct TrackSessionOptions {
+  vist::VistTrackerOptions tracker;  // hand and nominal hand size come from the session
+  double warmup_s = 5.0;             // from the first IMU sample; not scored
+  std::filesystem::path output_path;
+  bool overwrite_output = false;
+};
+struct TrackSessionResult {
+  vist::VistSessionInfo info;
+  std::uint64_t imu_samples = 0, stereo_frames = 0, poses = 0, ground_truth_poses = 0;
+  std::uint64_t skipped_records = 0;
+  RecordingSummary recording;
+  bool scored = false;  // the session has ground truth covering the output
+  ErrorSummary keypoints, all_joints;
+  std::array<double, 4> keypoint_mean_mm{};
+  double session_seconds = 0.0;  // first to last IMU sample
+  double tracker_seconds = 0.0;  // wall time inside the tracker
+  vist::VistStats stats;
+};
+Result<TrackSessionResult> track_session(const std::filesystem::path& session, const TrackSessionOptions& options = {});
 
 // Mean, median, p95, PCK and AUC of a set of errors (reorders them).
 ErrorSummary summarize(std::vector<float>& errors_mm);

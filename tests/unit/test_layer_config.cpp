@@ -93,3 +93,18 @@ TEST(LayerConfig, VistSourcesReplayASessionForTheRightHandByDefault) {
   ASSERT_FALSE(missing.ok());
   EXPECT_TRUE(contains(missing.error().message, "VIST session")) << missing.error().message;
 }
+
+TEST(LayerConfig, GloveSourcesDefaultToASimulatedWearerInViewSpace) {
+  auto c = parse_layer_config("[[source]]\ntype = \"glove\"\nsubject = 5\n", "g.toml");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  const auto& s = c->sources[0];
+  EXPECT_EQ(s.type, SourceType::glove);
+  EXPECT_EQ(s.space, ReferenceSpace::view);
+  EXPECT_EQ(s.input, "sim");
+  EXPECT_EQ(s.subject, 5);
+  ASSERT_EQ(s.hands.size(), 1u);
+  EXPECT_TRUE(contains(s.describe(), "glove source"));
+  auto bad = parse_layer_config("[[source]]\ntype = \"glove\"\ninput = \"usb\"\n", "g.toml");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_TRUE(contains(bad.error().message, "sim")) << bad.error().message;
+}

@@ -115,8 +115,8 @@ int run_calibrate_stereo(const CalibrateStereoArgs& a) {
 }  // namespace
 
 void add_calibrate_command(CLI::App& app, int& exit_code) {
-  CLI::App* calibrate = app.add_subcommand("calibrate", "Calibrate sensors: 'calibrate stereo' for VIST's camera");
-  calibrate->require_subcommand(1);
+  CLI::App* calibrate = subcommand_group(
+      app, "calibrate", "Calibrate sensors: 'calibrate stereo' for VIST's camera, 'calibrate glove' for the stretch glove");
 
   auto args = std::make_shared<CalibrateStereoArgs>();
   CLI::App* cmd = calibrate->add_subcommand(

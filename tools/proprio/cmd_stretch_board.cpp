@@ -1,4 +1,716 @@
+// proprio stretch-board list|monitor|emulate: the stretch glove's USB HID
+// read-out board (protocol in docs/stretch-glove-hid-protocol.md).
+//   list     HID devices with the board's VID/PID (or all of them)
+//   monitor  open a board (or a capture file), decode, print rates, loss,
+//            flagged readings and the latest capacitance of every combination;
+//            rides through unplugging and replugging
+//   emulate  a self-test: an emulated board with slowly varying synthetic
+//            capacitances, served over the in-memory HID link in real time and
+//            read by the same host code as a real board; reports what the host
+//            decoded and checks it against what the board measured. With
+//            --out, writes the board's reports to a capture file instead.
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
 #include "commands.hpp"
+#include "proprio/core/log.hpp"
+#include "proprio/devices/hid_transport.hpp"
+#include "proprio/devices/stretch_device.hpp"
+#include "proprio/devices/stretch_emulator.hpp"
+#include "proprio/devices/stretch_protocol.hpp"
+#include "proprio/devices/stretch_stream.hpp"
+
 namespace proprio::cli {
-void add_stretch_board_command(CLI::App&, int&) {}
+
+namespace {
+
+using namespace proprio::devices;
+
+std::atomic<bool> g_stop{false};
+extern "C" void on_stretch_sigint(int) {
+  g_stop.store(true);
+  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
 }
+
+// USB IDs are hexadecimal by convention: "1209", "0x1209".
+std::string check_hex_id(const std::string& text) {
+  char* end = nullptr;
+  const unsigned long v = std::strtoul(text.c_str(), &end, 16);
+  if (text.empty() || *end != '\0' || v > 0xFFFF) return "'" + text + "' is not a 16-bit hexadecimal USB ID";
+  return {};
+}
+std::uint16_t parse_hex_id(const std::string& text) {
+  return static_cast<std::uint16_t>(std::strtoul(text.c_str(), nullptr, 16));
+}
+std::string hex4(std::uint16_t v) {
+  char buf[8];
+  std::snprintf(buf, sizeof buf, "%04x", v);
+  return buf;
+}
+unsigned long long ull(std::uint64_t v) { return static_cast<unsigned long long>(v); }
+double percent(std::uint64_t part, std::uint64_t whole) {
+  return whole == 0 ? 0.0 : 100.0 * static_cast<double>(part) / static_cast<double>(whole);
+}
+
+// ---------------------------------------------------------------------------
+// list
+
+struct ListArgs {
+  bool all = false;
+  std::string vid = hex4(kStretchUsbVendorId);
+  std::string pid = hex4(kStretchUsbProductId);
+};
+
+int run_list(const ListArgs& a) {
+  const std::uint16_t vid = a.all ? 0 : parse_hex_id(a.vid);
+  const std::uint16_t pid = a.all ? 0 : parse_hex_id(a.pid);
+  auto devices = enumerate_hid_devices(vid, pid);
+  if (!devices) return logger().error("{}", devices.error().message), 1;
+  if (devices->empty()) {
+    if (a.all) {
+      std::printf("no HID devices found (hidapi %s)\n", hidapi_version().c_str());
+    } else {
+      std::printf("no stretch board found with VID:PID %s:%s; 'proprio stretch-board list --all' lists every HID "
+                  "device\n",
+                  hex4(vid).c_str(), hex4(pid).c_str());
+    }
+    return 0;
+  }
+  std::printf("%-20s %-9s %-8s %-4s %-16s %s\n", "path", "vid:pid", "usage", "intf", "serial", "manufacturer / product");
+  for (const HidDeviceInfo& d : *devices) {
+    const bool board = d.vendor_id == kStretchUsbVendorId && d.product_id == kStretchUsbProductId &&
+                       (d.usage_page == 0 || d.usage_page == kStretchHidUsagePage);
+    std::printf("%-20s %s:%s %04x:%02x %-4d %-16s %s / %s%s\n", d.path.c_str(), hex4(d.vendor_id).c_str(),
+                hex4(d.product_id).c_str(), d.usage_page, d.usage, d.interface_number,
+                d.serial.empty() ? "-" : d.serial.c_str(), d.manufacturer.c_str(), d.product.c_str(),
+                board ? "  [stretch board]" : "");
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------
+// What the host saw, for all three ways of looking at a stream.
+
+// The newest reading of every combination, for the final grid.
+struct LatestValues {
+  std::array<double, kStretchMaxCombinations> pf{};
+  std::array<StretchMeasurementStatus, kStretchMaxCombinations> status{};
+  std::array<bool, kStretchMaxCombinations> seen{};
+  void add(const StretchSample& s) {
+    const std::size_t c = s.combination % kStretchMaxCombinations;
+    pf[c] = s.capacitance_pf;
+    status[c] = s.status;
+    seen[c] = true;
+  }
+  std::size_t count() const { return static_cast<std::size_t>(std::count(seen.begin(), seen.end(), true)); }
+};
+
+// Rows are top strips, columns bottom strips: the combination t * bottom + b.
+void print_grid(const LatestValues& latest, int top, int bottom) {
+  if (top <= 0 || bottom <= 0) return;
+  std::printf("\nlatest capacitance per combination, pF (row = top strip, column = bottom strip; S saturated, "
+              "Z below zero, N no signal, - not seen)\n     ");
+  for (int b = 0; b < bottom; ++b) std::printf(" %6d", b);
+  std::printf("\n");
+  for (int t = 0; t < top; ++t) {
+    std::printf("%4d ", t);
+    for (int b = 0; b < bottom; ++b) {
+      const std::size_t c = static_cast<std::size_t>(t * bottom + b);
+      if (c >= kStretchMaxCombinations || !latest.seen[c]) {
+        std::printf(" %6s", "-");
+        continue;
+      }
+      switch (latest.status[c]) {
+        case StretchMeasurementStatus::ok: std::printf(" %6.1f", latest.pf[c]); break;
+        case StretchMeasurementStatus::saturated: std::printf(" %6s", "S"); break;
+        case StretchMeasurementStatus::below_zero: std::printf(" %6s", "Z"); break;
+        case StretchMeasurementStatus::no_signal: std::printf(" %6s", "N"); break;
+      }
+    }
+    std::printf("\n");
+  }
+}
+
+// The totals every mode ends with. span_s: the device time the measurements
+// cover (rates are per device second).
+void print_summary(const StretchStreamStats& s, double span_s) {
+  const std::uint64_t expected = s.measurements + s.lost;
+  std::printf("\nreports: %llu read, %llu accepted, %llu duplicate, %llu late, %llu undecodable",
+              ull(s.reports), ull(s.accepted), ull(s.duplicates), ull(s.late), ull(s.decode_errors));
+  if (s.other_reports) std::printf(", %llu other", ull(s.other_reports));
+  if (s.wrong_layout) std::printf(", %llu refused (wrong strip counts)", ull(s.wrong_layout));
+  if (s.accepted == 0) {
+    std::printf("\nno measurements\n");
+    return;
+  }
+  std::printf("\nmeasurements: %llu received (%.1f/s), %llu lost (%.2f%%) in %llu gap(s); flagged: %llu saturated, "
+              "%llu below zero, %llu no signal\n",
+              ull(s.measurements), span_s > 0 ? static_cast<double>(s.measurements) / span_s : 0.0, ull(s.lost),
+              percent(s.lost, expected), ull(s.gaps), ull(s.by_status[1]), ull(s.by_status[2]),
+              ull(s.by_status[3]));
+  std::printf("board: %u x %u strips (%u combinations), measurement period %.2f us (%.1f/s), %llu restart(s), "
+              "%llu overrun report(s), %llu sequence wrap(s), %llu timestamp wrap(s)\n",
+              s.top_strips, s.bottom_strips, s.top_strips * s.bottom_strips, s.measurement_period_us,
+              1e6 / s.measurement_period_us, ull(s.device_resets), ull(s.device_overruns), ull(s.sequence_wraps),
+              ull(s.timestamp_wraps));
+  if (s.decode_errors) {
+    std::printf("undecodable by reason:");
+    for (std::size_t c = 1; c < kStretchDecodeErrcCount; ++c) {
+      if (s.decode_errors_by_code[c]) {
+        std::printf(" %s %llu", to_string(static_cast<StretchDecodeErrc>(c)), ull(s.decode_errors_by_code[c]));
+      }
+    }
+    std::printf("\nlast: %s\n", describe(s.last_decode_error).c_str());
+  }
+  if (s.measurements_flagged()) {
+    // The few combinations that account for most flagged readings point at a broken lead or a shorted cell.
+    std::vector<std::size_t> worst;
+    for (std::size_t c = 0; c < kStretchMaxCombinations; ++c) {
+      if (s.flagged_by_combination[c]) worst.push_back(c);
+    }
+    std::sort(worst.begin(), worst.end(), [&](std::size_t a, std::size_t b) {
+      return s.flagged_by_combination[a] > s.flagged_by_combination[b];
+    });
+    std::printf("most flagged combinations (top strip, bottom strip: count):");
+    for (std::size_t i = 0; i < worst.size() && i < 8; ++i) {
+      const std::size_t c = worst[i];
+      std::printf(" (%zu, %zu: %u)", c / std::max<std::size_t>(s.bottom_strips, 1),
+                  c % std::max<std::size_t>(s.bottom_strips, 1), s.flagged_by_combination[c]);
+    }
+    std::printf("\n");
+  }
+}
+
+// ---------------------------------------------------------------------------
+// monitor
+
+struct MonitorArgs {
+  std::string vid = hex4(kStretchUsbVendorId);
+  std::string pid = hex4(kStretchUsbProductId);
+  std::string serial;
+  std::string path;
+  double seconds = 0.0;
+  double interval_s = 1.0;
+  double rate_hz = kStretchDefaultRateHz;
+  int top_strips = 0;
+  int bottom_strips = 0;
+  std::string from_file;
+};
+
+// Whether a complete report with a matching CRC starts at `at`.
+bool valid_frame_at(std::span<const std::uint8_t> bytes, std::size_t at) {
+  const std::size_t size = stretch_report_size_for_id(bytes[at]);
+  if (size == 0 || bytes.size() - at < size) return false;
+  const auto frame = bytes.subspan(at, size);
+  return crc16_ccitt(frame.first(size - 2)) == static_cast<std::uint16_t>(frame[size - 2] | frame[size - 1] << 8);
+}
+
+StretchStreamOptions stream_options(const MonitorArgs& a) {
+  StretchStreamOptions so;
+  so.nominal_rate_hz = a.rate_hz;
+  so.expected_top_strips = static_cast<std::uint8_t>(a.top_strips);
+  so.expected_bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
+  return so;
+}
+
+// A capture file: report after report as hid_read returns them; each
+// report's ID gives its size. After a bad frame the reader goes on at the
+// next offset where a valid report starts: a corrupted payload costs that
+// report, a corrupted ID byte or a torn write no more than the bytes up to
+// the next good report.
+int monitor_file(const MonitorArgs& a) {
+  std::ifstream in(a.from_file, std::ios::binary);
+  if (!in) {
+    return logger().error("cannot open {}: {}; pass a file written by 'proprio stretch-board emulate --out' or "
+                          "captured with 'cat /dev/hidrawN'",
+                          a.from_file, std::strerror(errno)),
+           1;
+  }
+  const std::vector<std::uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  StretchStreamDecoder decoder(stream_options(a));
+  std::array<StretchSample, kStretchMeasurementsPerReport> out;
+  LatestValues latest;
+  std::uint64_t skipped_bytes = 0;
+  std::size_t next_good = 0;  // the next offset where a valid report starts, once searched for
+  // Device time covered, summed over epochs (a restart starts a new timeline).
+  double span_s = 0.0;
+  bool in_epoch = false;
+  std::int64_t epoch_first_us = 0, epoch_last_us = 0;
+  std::uint32_t epoch = 0;
+  for (std::size_t at = 0; at < bytes.size();) {
+    std::size_t size = stretch_report_size_for_id(bytes[at]);
+    if (size == 0) {
+      ++skipped_bytes;
+      ++at;
+      continue;
+    }
+    size = std::min(size, bytes.size() - at);
+    if (!valid_frame_at(bytes, at) && at + size < bytes.size() && !valid_frame_at(bytes, at + size)) {
+      // Neither this report nor the next is good: framing may be lost. Find
+      // where the next good report starts (once per damaged stretch).
+      if (next_good <= at) {
+        next_good = at + 1;
+        while (next_good < bytes.size() && !valid_frame_at(bytes, next_good)) ++next_good;
+      }
+      if ((next_good - at) % size != 0) {
+        skipped_bytes += next_good - at;  // torn or shifted: not whole reports
+        at = next_good;
+        continue;
+      }
+      // Whole reports, just damaged: decode them so they count as undecodable.
+    }
+    const auto r = decoder.push(std::span(bytes).subspan(at, size), out);
+    at += size;
+    if (r.verdict != StretchReportVerdict::accepted) continue;
+    if (!in_epoch || r.epoch != epoch) {
+      if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
+      in_epoch = true;
+      epoch = r.epoch;
+      epoch_first_us = r.device_time_us;
+      epoch_last_us = r.last_device_time_us;
+    }
+    epoch_last_us = std::max(epoch_last_us, r.last_device_time_us);
+    for (std::size_t i = 0; i < r.sample_count; ++i) latest.add(out[i]);
+  }
+  if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
+  const StretchStreamStats& s = decoder.stats();
+  // A measurement's span is one period longer than first-to-last.
+  if (s.accepted > 0) span_s += s.measurement_period_us * 1e-6 * static_cast<double>(s.device_resets + 1);
+  std::printf("%s: %zu bytes, %.2f s of device time", a.from_file.c_str(), bytes.size(), span_s);
+  if (skipped_bytes) std::printf(", %llu bytes skipped to resynchronise", ull(skipped_bytes));
+  std::printf("\n");
+  print_summary(s, span_s);
+  print_grid(latest, s.top_strips, s.bottom_strips);
+  return s.accepted > 0 ? 0 : 1;
+}
+
+// Per interval: what changed since the last line.
+void print_status_line(double elapsed, const StretchDeviceStats& st, const StretchDeviceStats& prev, double dt,
+                       const LatestValues& latest) {
+  const auto d = [&](std::uint64_t cur, std::uint64_t old) { return static_cast<double>(cur - old); };
+  const double lat_n = d(st.excess_latency_count, prev.excess_latency_count);
+  const double lat_avg_ms = lat_n > 0 ? (st.excess_latency_sum_ns - prev.excess_latency_sum_ns) / lat_n * 1e-6 : 0.0;
+  double lo = 0.0, hi = 0.0;
+  bool any = false;
+  for (std::size_t c = 0; c < kStretchMaxCombinations; ++c) {
+    if (!latest.seen[c] || latest.status[c] != StretchMeasurementStatus::ok) continue;
+    lo = any ? std::min(lo, latest.pf[c]) : latest.pf[c];
+    hi = any ? std::max(hi, latest.pf[c]) : latest.pf[c];
+    any = true;
+  }
+  std::printf("%7.1fs %-12s %5.1f reports/s %7.1f meas/s  lost %llu  dup %llu  late %llu  bad %llu  flagged %llu  "
+              "restarts %llu  clock %s %+.1f ppm  latency above floor %.2f ms  latest %.1f-%.1f pF over %zu "
+              "combinations\n",
+              elapsed, to_string(st.state), d(st.reports_read, prev.reports_read) / dt,
+              d(st.stream.measurements, prev.stream.measurements) / dt, ull(st.stream.lost - prev.stream.lost),
+              ull(st.stream.duplicates - prev.stream.duplicates), ull(st.stream.late - prev.stream.late),
+              ull(st.stream.decode_errors - prev.stream.decode_errors),
+              ull(st.stream.measurements_flagged() - prev.stream.measurements_flagged()),
+              ull(st.stream.device_resets), st.clock_locked ? "locked" : "unlocked", st.clock_skew_ppm, lat_avg_ms, lo,
+              hi, latest.count());
+  std::fflush(stdout);
+}
+
+void print_device_totals(const StretchDeviceStats& st, double elapsed) {
+  std::printf("\n%.1f s: %llu connect(s), %llu disconnect(s), %llu failed open(s); %llu measurements delivered, "
+              "%llu rejected (flagged), %llu dropped at a full queue; clock %+.2f ppm, %llu re-lock(s), time clamps "
+              "%llu, latency above floor: mean %.2f ms, max %.2f ms",
+              elapsed, ull(st.connects), ull(st.disconnects), ull(st.open_failures), ull(st.samples_delivered),
+              ull(st.samples_rejected), ull(st.queue_overruns), st.clock_skew_ppm, ull(st.clock_relocks),
+              ull(st.time_clamps),
+              st.excess_latency_count ? st.excess_latency_sum_ns / static_cast<double>(st.excess_latency_count) * 1e-6
+                                      : 0.0,
+              static_cast<double>(st.excess_latency_max_ns) * 1e-6);
+  if (st.have_info) {
+    std::printf("\nfirmware %u.%u.%u, %u x %u strips at %u measurements/s, full scale %.3f pF, parasitic %.3f pF "
+                "subtracted",
+                st.info.firmware[0], st.info.firmware[1], st.info.firmware[2], st.info.top_strips,
+                st.info.bottom_strips, st.info.rate_hz, stretch_count_to_pf(st.info.full_scale_ff),
+                stretch_count_to_pf(st.info.parasitic_ff));
+  }
+}
+
+// Runs a started device until `seconds` (0: Ctrl-C), printing a line every
+// interval; per_sample sees every measurement on this thread.
+template <typename PerSample>
+double watch(StretchDevice& device, double seconds, double interval_s, LatestValues& latest, PerSample&& per_sample) {
+  g_stop.store(false);
+  auto previous = std::signal(SIGINT, on_stretch_sigint);
+  const auto start = std::chrono::steady_clock::now();
+  auto next_print = start + std::chrono::duration<double>(interval_s);
+  StretchDeviceStats prev = device.stats();
+  auto prev_time = start;
+  StretchSample sample;
+  while (!g_stop.load()) {
+    while (device.pop(sample)) {
+      latest.add(sample);
+      per_sample(sample);
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (seconds > 0 && std::chrono::duration<double>(now - start).count() >= seconds) break;
+    if (now >= next_print) {
+      const StretchDeviceStats st = device.stats();
+      print_status_line(std::chrono::duration<double>(now - start).count(), st, prev,
+                        std::chrono::duration<double>(now - prev_time).count(), latest);
+      prev = st;
+      prev_time = now;
+      next_print += std::chrono::duration<double>(interval_s);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  device.stop();
+  while (device.pop(sample)) {
+    latest.add(sample);
+    per_sample(sample);
+  }
+  std::signal(SIGINT, previous);
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void print_state(StretchLinkState state, std::string_view detail) {
+  // On the reader thread; stdout is line-buffered per call.
+  std::printf("[%s] %.*s\n", to_string(state), static_cast<int>(detail.size()), detail.data());
+  std::fflush(stdout);
+}
+
+int monitor_live(const MonitorArgs& a) {
+  HidDeviceSelector sel = stretch_board_selector();
+  sel.vendor_id = parse_hex_id(a.vid);
+  sel.product_id = parse_hex_id(a.pid);
+  sel.serial = a.serial;
+  sel.path = a.path;
+  StretchDeviceOptions o;
+  o.stream = stream_options(a);
+  StretchDevice device(std::make_unique<HidapiTransport>(sel), o);
+  device.set_state_callback(print_state);
+  if (a.seconds > 0) {
+    std::printf("monitoring %s for %g s (Ctrl-C stops early)\n", sel.describe().c_str(), a.seconds);
+  } else {
+    std::printf("monitoring %s (Ctrl-C to stop)\n", sel.describe().c_str());
+  }
+  if (auto s = device.start(); !s) return logger().error("{}", s.error().message), 1;
+  LatestValues latest;
+  const double elapsed = watch(device, a.seconds, a.interval_s, latest, [](const StretchSample&) {});
+  const StretchDeviceStats st = device.stats();
+  print_device_totals(st, elapsed);
+  print_summary(st.stream, elapsed);
+  print_grid(latest, st.stream.top_strips, st.stream.bottom_strips);
+  if (st.stream.accepted == 0) {
+    logger().error("no measurements received from {}", sel.describe());
+    return 1;
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------
+// emulate
+
+struct EmulateArgs {
+  std::string out;
+  bool force = false;
+  double seconds = 5.0;
+  double interval_s = 1.0;
+  std::uint64_t seed = 1;
+  int top_strips = 13;
+  int bottom_strips = 14;
+  int rate_hz = kStretchDefaultRateHz;
+  double clock_ppm = 0.0;
+  std::uint32_t start_timestamp_us = 0;
+  double drop = 0.0, duplicate = 0.0, corrupt = 0.0, reorder = 0.0, saturate = 0.0, overrun = 0.0;
+  std::vector<std::string> unplugs;
+};
+
+std::string check_unplug(const std::string& text) {
+  const auto colon = text.find(':');
+  char* end = nullptr;
+  if (colon == std::string::npos) return "'" + text + "': use AT:FOR, seconds, e.g. 2.5:1";
+  const double at = std::strtod(text.substr(0, colon).c_str(), &end);
+  if (*end != '\0' || !(at >= 0)) return "'" + text + "': AT must be seconds >= 0";
+  const double dur = std::strtod(text.substr(colon + 1).c_str(), &end);
+  if (*end != '\0' || !(dur > 0)) return "'" + text + "': FOR must be seconds > 0";
+  return {};
+}
+
+// Slowly varying synthetic capacitances: each combination its own level (a
+// measurement sums a few cells of ~20 pF), drifting by ±5 pF at 0.1-0.4 Hz
+// with its own phase, as a hand moving slowly would.
+struct SyntheticProvider {
+  std::size_t bottom = 14;
+  double operator()(std::size_t combination, TimeNs t_ns) const {
+    const double t = ns_to_seconds(t_ns);
+    const double top_strip = static_cast<double>(combination / bottom);
+    const double bottom_strip = static_cast<double>(combination % bottom);
+    const double level = 40.0 + 3.0 * std::fmod(top_strip, 5.0) + 2.0 * std::fmod(bottom_strip, 4.0);
+    const double hz = 0.1 + 0.1 * std::fmod(static_cast<double>(combination), 4.0);
+    return level + 5.0 * std::sin(2.0 * M_PI * hz * t + 0.37 * static_cast<double>(combination));
+  }
+  static constexpr double max_slope_pf_per_s = 5.0 * 2.0 * M_PI * 0.4;
+};
+
+StretchEmulatorOptions emulator_options(const EmulateArgs& a) {
+  StretchEmulatorOptions eo;
+  eo.top_strips = static_cast<std::uint8_t>(a.top_strips);
+  eo.bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
+  eo.rate_hz = static_cast<std::uint16_t>(a.rate_hz);
+  eo.clock_error_ppm = a.clock_ppm;
+  eo.boot_timestamp_us = a.start_timestamp_us;
+  eo.seed = a.seed;
+  eo.faults.drop_probability = a.drop;
+  eo.faults.duplicate_probability = a.duplicate;
+  eo.faults.corrupt_probability = a.corrupt;
+  eo.faults.reorder_probability = a.reorder;
+  eo.faults.saturate_probability = a.saturate;
+  eo.faults.device_overrun_probability = a.overrun;
+  for (const std::string& u : a.unplugs) {
+    const auto colon = u.find(':');
+    eo.faults.unplugs.push_back({seconds_to_ns(std::strtod(u.substr(0, colon).c_str(), nullptr)),
+                                 seconds_to_ns(std::strtod(u.substr(colon + 1).c_str(), nullptr))});
+  }
+  return eo;
+}
+
+void print_board_faults(const StretchEmulatorStats& st) {
+  std::printf("board: %llu measurements, %llu reports sent; faults: %llu dropped, %llu duplicated, %llu corrupted, "
+              "%llu reordered, %llu discarded by the board (overrun), %llu saturated readings injected, %llu "
+              "boot(s)\n",
+              ull(st.measurements), ull(st.reports_sent), ull(st.dropped), ull(st.duplicated), ull(st.corrupted),
+              ull(st.reordered), ull(st.device_overruns), ull(st.injected_saturations), ull(st.boots));
+}
+
+// Offline: the board's reports for --seconds, back to back, for 'monitor --from-file'.
+int emulate_to_file(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
+  if (!a.force && std::filesystem::exists(a.out)) return logger().error("{} exists; pass --force to overwrite it", a.out), 1;
+  auto emulator = StretchEmulator::create(eo, SyntheticProvider{static_cast<std::size_t>(a.bottom_strips)});
+  if (!emulator) return logger().error("{}", emulator.error().message), 2;
+  std::ofstream file(a.out, std::ios::binary | std::ios::trunc);
+  if (!file) return logger().error("cannot write {}: {}", a.out, std::strerror(errno)), 1;
+  std::vector<StretchEmulatedReport> reports;
+  std::uint64_t bytes = 0;
+  const TimeNs end = seconds_to_ns(a.seconds);
+  for (TimeNs t = 0;; t += 100 * kNsPerMillisecond) {
+    emulator->advance_to(std::min(t, end), reports);
+    if (t >= end) emulator->flush(reports);
+    for (const auto& r : reports) file.write(reinterpret_cast<const char*>(r.bytes.data()), r.bytes.size());
+    bytes += reports.size() * kStretchDataReportSize;
+    reports.clear();
+    if (t >= end) break;
+  }
+  file.close();
+  if (!file) return logger().error("writing {} failed", a.out), 1;
+  std::printf("wrote %s: %llu bytes, %.1f s of a %d x %d strip board at %d measurements/s, seed %llu\n", a.out.c_str(),
+              ull(bytes), a.seconds, a.top_strips, a.bottom_strips, a.rate_hz, ull(a.seed));
+  print_board_faults(emulator->stats());
+  return 0;
+}
+
+// Live: the board served over the in-memory HID link, the host reading it as a real one.
+int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
+  const SyntheticProvider provider{static_cast<std::size_t>(a.bottom_strips)};
+  auto emulator = StretchEmulator::create(eo, provider);
+  if (!emulator) return logger().error("{}", emulator.error().message), 2;
+  auto link = std::make_shared<FakeHidLink>();
+  StretchEmulatorServer server(std::move(*emulator), link);
+  StretchDeviceOptions o;
+  o.stream.nominal_rate_hz = a.rate_hz;
+  o.stream.expected_top_strips = static_cast<std::uint8_t>(a.top_strips);
+  o.stream.expected_bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
+  o.reconnect_backoff_max_ns = 200 * kNsPerMillisecond;
+  o.deliver_flagged = true;  // the self-test checks that flagged readings are the injected ones
+  StretchDevice device(std::make_unique<FakeHidTransport>(link), o);
+  device.set_state_callback(print_state);
+  std::printf("emulating a %d x %d strip board (%d combinations) at %d measurements/s for %g s over the in-memory HID "
+              "link, seed %llu\n",
+              a.top_strips, a.bottom_strips, a.top_strips * a.bottom_strips, a.rate_hz, a.seconds, ull(a.seed));
+  if (auto s = device.start(); !s) return logger().error("{}", s.error().message), 1;
+  server.start();
+  // The unplugs cut the cable too: the host sees the board vanish and come back.
+  for (const StretchOutage& u : eo.faults.unplugs) link->schedule_unplug(server.time_zero_ns() + u.at_ns, u.duration_ns);
+
+  const TimeNs t0 = server.time_zero_ns();
+  const double tolerance_pf = SyntheticProvider::max_slope_pf_per_s * 0.010 + 0.5 * kStretchPfPerCount;
+  std::uint64_t checked = 0, wrong_values = 0, flagged_seen = 0, out_of_order = 0;
+  double worst_error_pf = 0.0;
+  TimeNs previous_time = 0;
+  LatestValues latest;
+  const double elapsed = watch(device, a.seconds, a.interval_s, latest, [&](const StretchSample& s) {
+    if (s.time_ns <= previous_time) ++out_of_order;
+    previous_time = s.time_ns;
+    if (s.status != StretchMeasurementStatus::ok) {
+      ++flagged_seen;
+      return;
+    }
+    // The provider at the host's time for the measurement: right within the
+    // drift over a 10 ms time error, so this checks values and times at once.
+    const double error = std::fabs(s.capacitance_pf - provider(s.combination, s.time_ns - t0));
+    worst_error_pf = std::max(worst_error_pf, error);
+    ++checked;
+    if (error > tolerance_pf) ++wrong_values;
+  });
+  server.stop();
+  const StretchDeviceStats st = device.stats();
+  const StretchEmulatorStats board = server.emulator_stats();
+  const FakeHidLinkStats cable = link->stats();
+  print_device_totals(st, elapsed);
+  print_summary(st.stream, elapsed);
+  print_grid(latest, a.top_strips, a.bottom_strips);
+  std::printf("\n");
+  print_board_faults(board);
+
+  // The self-test: what the host decoded against what the board did.
+  bool pass = true;
+  auto check = [&pass](bool ok, const std::string& what) {
+    std::printf("  [%s] %s\n", ok ? "ok" : "FAIL", what.c_str());
+    pass = pass && ok;
+  };
+  char line[256];
+  std::printf("\nself-test:\n");
+  check(checked > 0, "measurements arrived (" + std::to_string(checked) + " usable)");
+  std::snprintf(line, sizeof line,
+                "every usable value matches the board's at its mapped time: worst |error| %.4f pF, tolerance %.4f pF "
+                "(%llu beyond)",
+                worst_error_pf, tolerance_pf, ull(wrong_values));
+  check(wrong_values == 0, line);
+  check(out_of_order == 0, "measurement times strictly increase (" + std::to_string(out_of_order) + " did not)");
+  const std::size_t combinations = static_cast<std::size_t>(a.top_strips * a.bottom_strips);
+  if (st.stream.measurements >= 2 * combinations) {
+    check(latest.count() == combinations,
+          "every combination was measured (" + std::to_string(latest.count()) + " of " + std::to_string(combinations) + ")");
+  }
+  // Reports the board sent, less those whose arrival fell into an unplug, all reached the decoder.
+  const std::uint64_t reached = cable.delivered;
+  const StretchStreamStats& s = st.stream;
+  check(st.reports_read == reached && s.reports == reached,
+        "every report the link delivered was decoded (" + std::to_string(s.reports) + " of " + std::to_string(reached) + ")");
+  check(s.decode_errors >= board.corrupted && s.decode_errors <= board.corrupted * 2,
+        "corrupted reports were caught by the CRC (" + std::to_string(s.decode_errors) + " undecodable, " +
+            std::to_string(board.corrupted) + " corrupted)");
+  check(flagged_seen == s.measurements_flagged() && s.by_status[1] <= board.saturated,
+        "flagged readings are the board's (" + std::to_string(flagged_seen) + " flagged, " +
+            std::to_string(board.saturated) + " saturated at the board)");
+  const std::uint64_t restarts = board.boots - 1;
+  check(s.device_resets == restarts, "board restarts recognised (" + std::to_string(s.device_resets) + " of " +
+                                         std::to_string(restarts) + ")");
+  std::printf("self-test %s\n", pass ? "PASSED" : "FAILED");
+  return pass ? 0 : 1;
+}
+
+int run_emulate(const EmulateArgs& a) {
+  const StretchEmulatorOptions eo = emulator_options(a);
+  if (auto s = eo.validate(); !s) return logger().error("{}", s.error().message), 2;
+  return a.out.empty() ? emulate_live(a, eo) : emulate_to_file(a, eo);
+}
+
+}  // namespace
+
+void add_stretch_board_command(CLI::App& app, int& exit_code) {
+  CLI::App* board = app.add_subcommand(
+      "stretch-board",
+      "The stretch glove's USB HID read-out board (13 x 14 strips, 960 measurements/s; protocol in "
+      "docs/stretch-glove-hid-protocol.md): list devices, monitor a board or a capture file, or run an emulated board "
+      "as a self-test.");
+  board->require_subcommand(1);
+  const auto hex = [](const std::string& s) { return check_hex_id(s); };
+
+  auto list = std::make_shared<ListArgs>();
+  CLI::App* list_cmd = board->add_subcommand("list", "List HID devices with the board's USB IDs (or all with --all).");
+  list_cmd->add_flag("--all", list->all, "List every HID device, not just stretch boards");
+  list_cmd->add_option("--vid", list->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
+  list_cmd->add_option("--pid", list->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
+  list_cmd->callback([list, &exit_code] { exit_code = run_list(*list); });
+
+  auto mon = std::make_shared<MonitorArgs>();
+  CLI::App* mon_cmd = board->add_subcommand(
+      "monitor",
+      "Open a board, decode its reports and print, every --interval, the report and measurement rates, lost, "
+      "duplicate, late and undecodable reports, flagged readings, restarts, the clock alignment and the range of the "
+      "latest values; at the end, totals and the latest capacitance of every combination. Keeps going through "
+      "unplugging and replugging. With --from-file, decodes a capture instead (rates are then per second of device "
+      "time). Exit status 1 if no measurements arrived.");
+  mon_cmd->add_option("--vid", mon->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
+  mon_cmd->add_option("--pid", mon->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
+  mon_cmd->add_option("--serial", mon->serial, "Open the board with this USB serial number");
+  mon_cmd->add_option("--path", mon->path, "Open this HID device node (e.g. /dev/hidraw3) instead of searching");
+  mon_cmd->add_option("--seconds", mon->seconds, "Stop after this long, s (0: until Ctrl-C)")
+      ->check(CLI::Range(0.0, 7.0 * 24 * 3600))
+      ->capture_default_str();
+  mon_cmd->add_option("--interval", mon->interval_s, "Seconds between status lines")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
+  mon_cmd->add_option("--rate", mon->rate_hz, "Measurement rate to assume until the board's own is measured, per s")
+      ->check(CLI::Range(1.0, static_cast<double>(kStretchMaxRateHz)))
+      ->capture_default_str();
+  mon_cmd->add_option("--top-strips", mon->top_strips,
+                      "Refuse a board without this many top strips (the layout's; 0: accept any)")
+      ->check(CLI::Range(0, static_cast<int>(kStretchMaxStrips)));
+  mon_cmd->add_option("--bottom-strips", mon->bottom_strips,
+                      "Refuse a board without this many bottom strips (0: accept any)")
+      ->check(CLI::Range(0, static_cast<int>(kStretchMaxStrips)));
+  mon_cmd->add_option("--from-file", mon->from_file, "Decode this capture file instead of a live board")
+      ->check(CLI::ExistingFile);
+  mon_cmd->callback([mon, &exit_code] { exit_code = mon->from_file.empty() ? monitor_live(*mon) : monitor_file(*mon); });
+
+  auto emu = std::make_shared<EmulateArgs>();
+  CLI::App* emu_cmd = board->add_subcommand(
+      "emulate",
+      "Self-test without hardware: an emulated board measures slowly varying synthetic capacitances and is served "
+      "over the in-memory HID link in real time; the host code that reads a real board decodes it, prints what it "
+      "saw (as monitor does) and checks it against the board: values and times, loss and fault accounting, restarts. "
+      "Exit status 0 when every check passes. Faults can be injected; the same seed gives the same board. With --out, "
+      "writes the board's reports to a capture file for 'monitor --from-file' instead (no real time).");
+  emu_cmd->add_option("--seconds", emu->seconds, "How long to run, s")
+      ->check(CLI::Range(0.1, 24.0 * 3600.0))
+      ->capture_default_str();
+  emu_cmd->add_option("--interval", emu->interval_s, "Seconds between status lines")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
+  emu_cmd->add_option("--seed", emu->seed, "Random seed for the faults")->capture_default_str();
+  emu_cmd->add_option("--top-strips", emu->top_strips, "Top-layer strips")
+      ->check(CLI::Range(1, static_cast<int>(kStretchMaxStrips)))
+      ->capture_default_str();
+  emu_cmd->add_option("--bottom-strips", emu->bottom_strips, "Bottom-layer strips")
+      ->check(CLI::Range(1, static_cast<int>(kStretchMaxStrips)))
+      ->capture_default_str();
+  emu_cmd->add_option("--rate", emu->rate_hz, "Measurements per second")
+      ->check(CLI::Range(1, static_cast<int>(kStretchMaxRateHz)))
+      ->capture_default_str();
+  emu_cmd->add_option("--clock-ppm", emu->clock_ppm, "Board crystal error, ppm (a real one is within ±100)")
+      ->check(CLI::Range(-1000.0, 1000.0))
+      ->capture_default_str();
+  emu_cmd->add_option("--start-timestamp-us", emu->start_timestamp_us,
+                      "Board µs counter at power-up; real firmware starts at 0, 4294000000 makes it wrap about 1 s in")
+      ->capture_default_str();
+  emu_cmd->add_option("--drop", emu->drop, "Probability that a report is lost")->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--duplicate", emu->duplicate, "Probability that a report is sent twice")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--corrupt", emu->corrupt, "Probability that a report has one bit flipped")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--reorder", emu->reorder, "Probability that a report is sent after the next one")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--saturate", emu->saturate, "Probability, per measurement, of a saturated reading")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--overrun", emu->overrun,
+                      "Probability that the board discards a report itself (transmit queue full)")
+      ->check(CLI::Range(0.0, 1.0));
+  emu_cmd->add_option("--unplug", emu->unplugs,
+                      "AT:FOR in seconds: the board loses power at AT for FOR, then boots again (repeatable)")
+      ->check([](const std::string& s) { return check_unplug(s); });
+  emu_cmd->add_option("--out", emu->out, "Write the reports to this capture file instead of running the self-test");
+  emu_cmd->add_flag("--force", emu->force, "Overwrite an existing --out file");
+  emu_cmd->callback([emu, &exit_code] { exit_code = run_emulate(*emu); });
+}
+
+}  // namespace proprio::cli

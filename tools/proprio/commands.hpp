@@ -25,6 +25,8 @@ void add_calibrate_command(CLI::App& app, int& exit_code);
 void add_glove_command(CLI::App& app, int& exit_code);
 // `sim-glove`: simulated stretch-glove sessions written as a training dataset.
 void add_sim_glove_command(CLI::App& app, int& exit_code);
+// `bench glove` and `calibrate glove`: the stretch glove's pipeline.
+void add_stretch_glove_commands(CLI::App& app, int& exit_code);
 // `stretch-board emulate|monitor|list`: the stretch glove's USB HID read-out board.
 void add_stretch_board_command(CLI::App& app, int& exit_code);
 // `layer install|uninstall|status|init-config` and `xr-probe`: built when the

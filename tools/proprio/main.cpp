@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   proprio::cli::add_replay_command(app, exit_code);
   proprio::cli::add_vist_commands(app, exit_code);
   proprio::cli::add_calibrate_command(app, exit_code);
+  proprio::cli::add_stretch_glove_commands(app, exit_code);
   proprio::cli::add_glove_command(app, exit_code);
   proprio::cli::add_sim_glove_command(app, exit_code);
   proprio::cli::add_stretch_board_command(app, exit_code);

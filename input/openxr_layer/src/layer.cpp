@@ -29,6 +29,7 @@
 #include "proprio/openxr_layer/loader_interfaces.hpp"
 #include "proprio/openxr_layer/xr_ext.hpp"
 #include "proprio/sim/sim_hand_source.hpp"
+#include "proprio/glove_eval/glove_evaluation.hpp"
 #include "proprio/vist/vist_hand_source.hpp"
 
 namespace proprio::openxr_layer {
@@ -169,6 +170,21 @@ Result<std::unique_ptr<HandSource>> make_vist_source(const SourceConfig& sc, con
   return std::unique_ptr<HandSource>(std::move(*source));
 }
 
+// The stretch glove on a simulated subject, streamed in real time.
+Result<std::unique_ptr<HandSource>> make_glove_source(const SourceConfig& sc, const LayerConfig& config) {
+  glove_eval::SimGloveSourceOptions o;
+  o.subject = sc.subject;
+  o.seed = sc.seed;
+  o.model = sc.model.empty() ? std::string(PROPRIO_DEFAULT_GLOVE_MODEL) : sc.model;
+  if (!sc.layout.empty()) {
+    auto layout = StretchGloveLayout::load(sc.layout);
+    if (!layout) return layout.error();
+    o.layout = std::move(*layout);
+  }
+  o.history.max_prediction_ns = config.max_prediction_ns;
+  return glove_eval::make_sim_glove_source(o);
+}
+
 // Loads the layer config and starts its sources. Failures are logged and
 // leave the instance without sources: the app then sees no hand tracking.
 void start_sources(Instance& inst) {
@@ -195,6 +211,13 @@ void start_sources(Instance& inst) {
       auto s = sim::SimHandSource::create(o);
       if (!s) {
         logger().error("Proprio layer: {}: sim source: {}", inst.config.origin, s.error().message);
+        continue;
+      }
+      source = std::move(*s);
+    } else if (sc.type == SourceType::glove) {
+      auto s = make_glove_source(sc, inst.config);
+      if (!s) {
+        logger().error("Proprio layer: {}: glove source: {}", inst.config.origin, s.error().message);
         continue;
       }
       source = std::move(*s);

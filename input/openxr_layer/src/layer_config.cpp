@@ -15,6 +15,7 @@ std::string_view to_string(SourceType t) noexcept {
     case SourceType::sim: return "sim";
     case SourceType::replay: return "replay";
     case SourceType::vist: return "vist";
+    case SourceType::glove: return "glove";
   }
   return "unknown";
 }
@@ -47,7 +48,10 @@ std::string SourceConfig::describe() const {
                 T_space_source.p.x(), T_space_source.p.y(), T_space_source.p.z(), rv.x() * 57.2958,
                 rv.y() * 57.2958, rv.z() * 57.2958);
   std::string s = buf;
-  if (type == SourceType::sim) {
+  if (type == SourceType::glove) {
+    std::snprintf(buf, sizeof buf, "; input %s, subject %d, seed %llu, model %s", input.c_str(), subject,
+                  static_cast<unsigned long long>(seed), model.empty() ? "(shipped)" : model.c_str());
+  } else if (type == SourceType::sim) {
     std::snprintf(buf, sizeof buf, "; protocol %s, subject %d, seed %llu, %.1f Hz",
                   std::string(sim::to_string(protocol)).c_str(), subject, static_cast<unsigned long long>(seed),
                   rate_hz);
@@ -105,10 +109,15 @@ Result<Vec3> vec3(const Config& c, std::string_view key) {
 Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
   const std::string where = c.source_name() + ": [[source]] #" + std::to_string(index + 1);
   SourceConfig s;
-  auto type = choose<SourceType>(c, "type", "", {{"sim", SourceType::sim}, {"replay", SourceType::replay}, {"vist", SourceType::vist}});
+  auto type = choose<SourceType>(c, "type", "",
+                                 {{"sim", SourceType::sim},
+                                  {"replay", SourceType::replay},
+                                  {"vist", SourceType::vist},
+                                  {"glove", SourceType::glove}});
   if (!type) return type.error().with_context(where);
   s.type = *type;
-  auto space = choose<ReferenceSpace>(c, "space", s.type == SourceType::sim ? "view" : "local",
+  const bool head_relative = s.type == SourceType::sim || s.type == SourceType::glove;
+  auto space = choose<ReferenceSpace>(c, "space", head_relative ? "view" : "local",
                                       {{"view", ReferenceSpace::view}, {"local", ReferenceSpace::local},
                                        {"stage", ReferenceSpace::stage}});
   if (!space) return space.error().with_context(where);
@@ -131,7 +140,24 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
   if (!r) return r.error().with_context(where);
   s.T_space_source = {so3_exp(*r * (M_PI / 180.0)), *p};
 
-  if (s.type == SourceType::sim) {
+  if (s.type == SourceType::glove) {
+    auto input = choose<std::string>(c, "input", "sim", {{"sim", std::string("sim")}});
+    if (!input) return input.error().with_context(where);
+    s.input = *input;
+    auto subject = c.get_int_or("subject", 3, 0, 14);
+    if (!subject) return subject.error().with_context(where);
+    s.subject = static_cast<int>(*subject);
+    auto seed = c.get_int_or("seed", 1, 0, INT64_MAX);
+    if (!seed) return seed.error().with_context(where);
+    s.seed = static_cast<std::uint64_t>(*seed);
+    auto model = c.get_string_or("model", "");
+    if (!model) return model.error().with_context(where);
+    s.model = *model;
+    auto layout = c.get_string_or("layout", "");
+    if (!layout) return layout.error().with_context(where);
+    s.layout = *layout;
+    if (!c.contains("hands")) s.hands = {Handedness::right};
+  } else if (s.type == SourceType::sim) {
     auto protocol = c.get_string_or("protocol", "free-motion");
     if (!protocol) return protocol.error().with_context(where);
     auto parsed = sim::parse_motion_protocol(*protocol);

@@ -16,7 +16,7 @@
 
 namespace proprio::openxr_layer {
 
-enum class SourceType { sim, replay, vist };
+enum class SourceType { sim, replay, vist, glove };
 enum class ReferenceSpace { view, local, stage };
 // What to do when the runtime implements XR_EXT_hand_tracking itself.
 enum class RuntimeHandTracking {
@@ -48,6 +48,12 @@ struct SourceConfig {
   // replayed through the VIST tracker in real time.
   std::string path;
   bool loop = true;
+
+  // glove: the stretch-sensing glove. input "sim" = simulated subject
+  // (subject, seed above); the model and layout default to the shipped ones.
+  std::string input = "sim";
+  std::string model;   // .onnx with its .json sidecar
+  std::string layout;  // glove layout TOML; empty: the built-in thesis-like glove
 
   std::string describe() const;
 };

@@ -45,11 +45,16 @@ namespace proprio {
 // horizontal in its flat rest layout (Fig. 5.3).
 enum class StretchDirection : std::uint8_t { along = 0, across = 1 };
 std::string_view to_string(StretchDirection d) noexcept;
+std::optional<StretchDirection> parse_stretch_direction(std::string_view s) noexcept;
 
 // The thesis's four sensor categories (Sec. 5.2.1), kept for the 14-to-44
 // sensor ablation (Fig. 5.10).
 enum class StretchCellCategory : std::uint8_t { joint = 0, abduction = 1, perpendicular = 2, dorsum = 3 };
 std::string_view to_string(StretchCellCategory c) noexcept;
+std::optional<StretchCellCategory> parse_stretch_cell_category(std::string_view s) noexcept;
+
+// "index_mcp_flexion" -> HandDof::index_mcp_flexion (the names of to_string(HandDof)).
+std::optional<HandDof> parse_hand_dof(std::string_view s) noexcept;
 
 struct StretchCell {
   std::string name;      // "index_mcp_along", ...
@@ -61,20 +66,30 @@ struct StretchCell {
   // glove_description.hpp), a fraction of the bone length from its joint.
   // Dorsum cells: along_fraction of hand length from the wrist, across_fraction
   // of hand width, + toward the little finger. Abduction cells sit in the web
-  // between two fingers: segment is the radial finger's proximal phalanx.
+  // between two fingers: segment is the radial finger's proximal phalanx (for
+  // the web between thumb and index, whose skin spans the thumb's metacarpal,
+  // thumb_metacarpal or thumb_proximal); the web reaches to the next finger
+  // toward the little finger.
   HandJoint segment = HandJoint::wrist;
   double along_fraction = 0.5;
   double across_fraction = 0.0;
-  double length_m = 0.0115;  // cell size in the rest layout (thesis: 5 x 7.5 or 5 x 11.5 mm)
+  // Cell size in the rest layout (thesis: 5 x 7.5 or 5 x 11.5 mm): length_m
+  // is the extent in the cell's stretch direction, width_m across it.
+  double length_m = 0.0115;
   double width_m = 0.005;
   double rest_capacitance_pf = 20.0;  // C0 at rest; a nominal value, per glove
   // Where the network input puts this cell: layer 0 = along, 1 = across.
   int grid_layer = 0;
   int grid_row = 0;
   int grid_col = 0;
+
+  bool operator==(const StretchCell&) const = default;
 };
 
 inline constexpr int kStretchGridSize = 5;  // 5 x 5 maps, as the thesis's Fig. 5.7-5.8
+inline constexpr int kStretchInputLayers = 2;
+// Floats in one network input (layers x rows x cols, NCHW with N = 1).
+inline constexpr std::size_t kStretchInputSize = kStretchInputLayers * kStretchGridSize * kStretchGridSize;
 
 struct StretchGloveLayout {
   std::string name;
@@ -97,11 +112,22 @@ struct StretchGloveLayout {
   }
   // measurement_count() x cell_count(), entries 0 or 1 (see the top of this file).
   Eigen::MatrixXd measurement_matrix() const;
-  // Flat index of each cell in the 2 x 5 x 5 input grid (layer, row, col).
+  // Flat index of each cell in the 2 x 5 x 5 input grid (layer, row, col):
+  // layer * 25 + row * 5 + col.
   std::vector<int> input_grid_index() const;
+  // Index of the cell with this name.
+  std::optional<std::size_t> find_cell(std::string_view cell_name) const;
+  // Everything parse() checks (strips in range, each strip pair used once,
+  // unique names and grid slots, output grid, a measurement matrix of full
+  // column rank), for layouts built in code. Errc::invalid_argument naming
+  // the cell and what to change.
+  Status validate() const;
   std::string describe() const;
-  // parse(to_toml()) gives this layout back.
+  // The layout in the file format parse() reads (docs/stretch-glove-layout.md);
+  // parse(to_toml()) gives this layout back, origin aside.
   std::string to_toml() const;
+
+  bool operator==(const StretchGloveLayout&) const = default;
 };
 
 }  // namespace proprio

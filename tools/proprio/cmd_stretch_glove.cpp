@@ -1,0 +1,277 @@
+// proprio bench glove: the stretch glove's pipeline on held-out simulated subjects.
+// proprio calibrate glove: the per-user min-max exploration, saved for later sessions.
+#include <algorithm>
+#include <cstdio>
+#include <chrono>
+#include <ctime>
+#include <future>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "commands.hpp"
+#include "progress.hpp"
+#include "proprio/core/stretch_glove_layout.hpp"
+#include "proprio/glove/calibration.hpp"
+#include "proprio/devices/stretch_device.hpp"
+#include "proprio/glove/readout.hpp"
+#include "proprio/glove_eval/glove_evaluation.hpp"
+#include "proprio/sim/stretch_glove_sim.hpp"
+#include "proprio/sim/subjects.hpp"
+
+namespace proprio::cli {
+namespace {
+
+Result<StretchGloveLayout> load_layout(const std::string& path) {
+  if (path.empty()) return StretchGloveLayout::thesis_default();
+  return StretchGloveLayout::load(path);
+}
+
+struct BenchGloveArgs {
+  std::string model = PROPRIO_DEFAULT_GLOVE_MODEL;
+  std::string global_model;  // trained with --calibration global (the thesis's scenario 3)
+  std::string layout;
+  int subjects = 5;  // held-out subjects 10..14
+  double minutes = 2.0;
+  double exploration_s = 60.0;
+  std::uint64_t seed = 1;
+  int threads = 0;
+  bool json = false;
+};
+
+int run_bench_glove(const BenchGloveArgs& a) {
+  auto layout = load_layout(a.layout);
+  if (!layout) {
+    std::fprintf(stderr, "error: %s\n", layout.error().message.c_str());
+    return 2;
+  }
+  struct Job {
+    glove_eval::GloveSessionSpec spec;
+  };
+  std::vector<Job> jobs;
+  std::vector<glove_eval::CalibrationMode> modes = {glove_eval::CalibrationMode::session};
+  if (!a.global_model.empty()) modes.push_back(glove_eval::CalibrationMode::global);
+  for (auto mode : modes) {
+    for (int i = 0; i < a.subjects; ++i) {
+      glove_eval::GloveSessionSpec s;
+      s.subject = glove_eval::kFirstHeldOutSubject + i;
+      s.task_s = a.minutes * 60.0;
+      s.exploration_s = a.exploration_s;
+      s.seed = a.seed;
+      s.calibration = mode;
+      jobs.push_back({s});
+    }
+  }
+  const unsigned threads = a.threads > 0 ? static_cast<unsigned>(a.threads)
+                                         : std::max(1u, std::thread::hardware_concurrency());
+  ProgressBar progress("bench glove", static_cast<double>(jobs.size()), "sessions");
+  std::size_t done = 0;
+  std::vector<Result<glove_eval::GloveSessionResult>> results(jobs.size(),
+                                                              make_error(Errc::unavailable, "not run"));
+  std::vector<std::future<void>> running;
+  std::size_t next = 0;
+  while (next < jobs.size() || !running.empty()) {
+    while (next < jobs.size() && running.size() < threads) {
+      const std::size_t j = next++;
+      running.push_back(std::async(std::launch::async, [&, j] {
+        const bool global = jobs[j].spec.calibration == glove_eval::CalibrationMode::global;
+        results[j] = glove_eval::run_glove_session(*layout, global ? a.global_model : a.model, jobs[j].spec);
+      }));
+    }
+    running.front().get();
+    running.erase(running.begin());
+    progress.update(static_cast<double>(++done));
+  }
+  progress.finish();
+
+  int failures = 0;
+  nlohmann::json out = {{"model", a.model},
+                        {"layout", layout->name},
+                        {"held_out_subjects", a.subjects},
+                        {"task_minutes", a.minutes},
+                        {"exploration_s", a.exploration_s},
+                        {"seed", a.seed},
+                        {"note", "simulated subjects; simulated accuracy is not real-world accuracy"}};
+  if (!a.json) {
+    std::printf("\nStretch glove on held-out simulated subjects (%d..%d), %.1f min of free motion each\n",
+                glove_eval::kFirstHeldOutSubject, glove_eval::kFirstHeldOutSubject + a.subjects - 1, a.minutes);
+    std::printf("%-28s %8s %10s %10s %12s\n", "calibration", "mean deg", "p95 deg", "1€ mean", "us/frame");
+  }
+  for (auto mode : modes) {
+    std::vector<glove_eval::GloveSessionResult> ok;
+    nlohmann::json per_subject = nlohmann::json::array();
+    for (std::size_t j = 0; j < jobs.size(); ++j) {
+      if (jobs[j].spec.calibration != mode) continue;
+      if (!results[j]) {
+        ++failures;
+        std::fprintf(stderr, "subject %d (%s): %s\n", jobs[j].spec.subject, std::string(to_string(mode)).c_str(),
+                     results[j].error().message.c_str());
+        continue;
+      }
+      ok.push_back(*results[j]);
+      per_subject.push_back({{"subject", jobs[j].spec.subject},
+                             {"mean_deg", results[j]->mean_deg},
+                             {"filtered_mean_deg", results[j]->filtered_mean_deg},
+                             {"calibration_coverage", results[j]->calibration_coverage}});
+    }
+    if (ok.empty()) continue;
+    const auto agg = glove_eval::aggregate(ok);
+    nlohmann::json dofs;
+    for (std::size_t d = 0; d < kHandDofCount; ++d) {
+      dofs[std::string(to_string(static_cast<HandDof>(d)))] = agg.dof_mean_deg[d];
+    }
+    out["cases"].push_back({{"calibration", std::string(to_string(mode))},
+                            {"sessions", agg.sessions},
+                            {"frames", agg.frames},
+                            {"mean_deg", agg.mean_deg},
+                            {"p95_deg", agg.p95_deg},
+                            {"filtered_mean_deg", agg.filtered_mean_deg},
+                            {"pipeline_us_per_frame", agg.pipeline_us_per_frame},
+                            {"per_dof_mean_deg", dofs},
+                            {"per_subject", per_subject}});
+    if (!a.json) {
+      std::printf("%-28s %8.2f %10.2f %10.2f %12.1f\n", std::string(to_string(mode)).c_str(), agg.mean_deg,
+                  agg.p95_deg, agg.filtered_mean_deg, agg.pipeline_us_per_frame);
+    }
+  }
+  if (a.json) std::printf("%s\n", out.dump(2).c_str());
+  return failures == 0 ? 0 : 1;
+}
+
+struct CalibrateGloveArgs {
+  std::string layout;
+  std::string out;
+  int sim_subject = -1;
+  double seconds = 60.0;
+  std::uint64_t seed = 1;
+  bool force = false;
+};
+
+// The exploration phase on a live read-out board: measurements through the
+// same read-out and calibrator as the run-time pipeline, with advice every 5 s.
+Result<glove::MinMaxCalibration> calibrate_from_board(const StretchGloveLayout& layout, double seconds,
+                                                      glove::CalibrationProgress& progress) {
+  devices::StretchDeviceOptions o;
+  o.stream.expected_top_strips = static_cast<std::uint8_t>(layout.top_strips);
+  o.stream.expected_bottom_strips = static_cast<std::uint8_t>(layout.bottom_strips);
+  devices::StretchDevice device(std::make_unique<devices::HidapiTransport>(devices::stretch_board_selector()), o);
+  if (auto st = device.start(); !st) return st.error();
+  auto readout = glove::MatrixReadout::create(layout);
+  if (!readout) return readout.error();
+  auto calibrator = glove::MinMaxCalibrator::create(layout);
+  if (!calibrator) return calibrator.error();
+  glove::CellFrame frame = readout->make_frame();
+  const TimeNs start = MonotonicClock::instance().now_ns();
+  TimeNs next_report = start + 5 * kNsPerSecond;
+  devices::StretchSample m;
+  while (MonotonicClock::instance().now_ns() < start + static_cast<TimeNs>(seconds * 1e9)) {
+    if (!device.pop(m)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      continue;
+    }
+    if (readout->push(m.combination, m.capacitance_pf, m.time_ns, frame) && frame.all_valid()) calibrator->add(frame);
+    if (MonotonicClock::instance().now_ns() >= next_report) {
+      next_report += 5 * kNsPerSecond;
+      const auto st = device.stats();
+      std::printf("  %3.0f s: %s (board: %s, %llu measurements)\n",
+                  1e-9 * static_cast<double>(MonotonicClock::instance().now_ns() - start),
+                  calibrator->progress().advice().c_str(), devices::to_string(st.state),
+                  static_cast<unsigned long long>(st.samples_delivered));
+    }
+  }
+  device.stop();
+  progress = calibrator->progress();
+  char created[32];
+  const std::time_t now = std::time(nullptr);
+  std::strftime(created, sizeof created, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  return calibrator->finish("proprio calibrate glove (read-out board)", created);
+}
+
+int run_calibrate_glove(const CalibrateGloveArgs& a) {
+  auto layout = load_layout(a.layout);
+  if (!layout) {
+    std::fprintf(stderr, "error: %s\n", layout.error().message.c_str());
+    return 2;
+  }
+  if (!a.force && std::filesystem::exists(a.out)) {
+    std::fprintf(stderr, "error: %s exists; pass --force to overwrite it\n", a.out.c_str());
+    return 2;
+  }
+  std::printf("Explore for %.0f s: make a fist, spread and close the fingers, bend each finger on its own, move the "
+              "thumb across the palm and out\n",
+              a.seconds);
+  Result<glove::MinMaxCalibration> cal = make_error(Errc::unavailable, "not run");
+  glove::CalibrationProgress progress;
+  if (a.sim_subject >= 0) {
+    auto r = glove_eval::calibrate_simulated(*layout, a.sim_subject, a.seed, a.seconds,
+                                             "proprio calibrate glove --sim-subject " + std::to_string(a.sim_subject));
+    if (r) {
+      progress = r->progress;
+      cal = std::move(r->calibration);
+    } else {
+      cal = r.error();
+    }
+  } else {
+    cal = calibrate_from_board(*layout, a.seconds, progress);
+  }
+  if (!cal) {
+    std::fprintf(stderr, "error: %s\n", cal.error().message.c_str());
+    return 1;
+  }
+  if (auto st = cal->save(a.out); !st) {
+    std::fprintf(stderr, "error: %s\n", st.error().message.c_str());
+    return 1;
+  }
+  std::printf("%s\nCalibration of %zu cells from %zu frames written to %s\n", progress.advice().c_str(),
+              cal->cell_count(), cal->frames, a.out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
+  auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
+  auto args = std::make_shared<BenchGloveArgs>();
+  auto* g = bench->add_subcommand(
+      "glove",
+      "Run the stretch glove's pipeline (read-out, min-max calibration, ONNX pose model, hand) on held-out\n"
+      "simulated subjects and print the joint-angle error with each session's own min-max calibration (the thesis's\n"
+      "scenario 4) and, with --global-model, with the training data's min-max (scenario 3).\n"
+      "Simulated accuracy is not real-world accuracy.");
+  g->add_option("--model", args->model, "pose model (.onnx with its .json sidecar)")->capture_default_str();
+  g->add_option("--global-model", args->global_model,
+                "also score a model trained with the training data's min-max (train.py --calibration global)");
+  g->add_option("--layout", args->layout, "glove layout TOML (default: the thesis-like glove)");
+  g->add_option("--subjects", args->subjects, "held-out simulated subjects (10, 11, ...)")
+      ->check(CLI::Range(1, sim::kSimSubjectCount - glove_eval::kFirstHeldOutSubject))
+      ->capture_default_str();
+  g->add_option("--minutes", args->minutes, "minutes of free motion per subject")
+      ->check(CLI::Range(0.1, 60.0))
+      ->capture_default_str();
+  g->add_option("--exploration-seconds", args->exploration_s, "calibration exploration per session")
+      ->check(CLI::Range(5.0, 600.0))
+      ->capture_default_str();
+  g->add_option("--seed", args->seed, "seed (1: the glove the shipped model was trained on)")->capture_default_str();
+  g->add_option("--threads", args->threads, "sessions in parallel (0: one per core)")->capture_default_str();
+  g->add_flag("--json", args->json, "print the metrics as JSON");
+  g->callback([args, &exit_code] { exit_code = run_bench_glove(*args); });
+
+  auto* cal = subcommand_group(app, "calibrate", "Calibrate sensors");
+  auto cargs = std::make_shared<CalibrateGloveArgs>();
+  auto* c = cal->add_subcommand(
+      "glove",
+      "Per-user min-max calibration of the stretch glove (Glauser 2019, Sec. 5.3.3): explore extreme poses while\n"
+      "the per-cell 20-frame medians' min and max are collected; prints which fingers need more movement.");
+  c->add_option("--out", cargs->out, "calibration file to write (TOML)")->required();
+  c->add_option("--layout", cargs->layout, "glove layout TOML (default: the thesis-like glove)");
+  c->add_option("--sim-subject", cargs->sim_subject,
+                "calibrate the simulated glove on this subject (0-14) instead of a read-out board on USB")
+      ->check(CLI::Range(0, sim::kSimSubjectCount - 1));
+  c->add_option("--seconds", cargs->seconds, "exploration length")->check(CLI::Range(5.0, 600.0))->capture_default_str();
+  c->add_option("--seed", cargs->seed, "simulation seed")->capture_default_str();
+  c->add_flag("--force", cargs->force, "overwrite --out");
+  c->callback([cargs, &exit_code] { exit_code = run_calibrate_glove(*cargs); });
+}
+
+}  // namespace proprio::cli

@@ -106,5 +106,14 @@ TEST(LayerConfig, GloveSourcesDefaultToASimulatedWearerInViewSpace) {
   EXPECT_TRUE(contains(s.describe(), "glove source"));
   auto bad = parse_layer_config("[[source]]\ntype = \"glove\"\ninput = \"usb\"\n", "g.toml");
   ASSERT_FALSE(bad.ok());
-  EXPECT_TRUE(contains(bad.error().message, "sim")) << bad.error().message;
+  EXPECT_TRUE(contains(bad.error().message, "sim, device")) << bad.error().message;
+
+  auto no_cal = parse_layer_config("[[source]]\ntype = \"glove\"\ninput = \"device\"\n", "g.toml");
+  ASSERT_FALSE(no_cal.ok());
+  EXPECT_TRUE(contains(no_cal.error().message, "calibrate glove")) << no_cal.error().message;
+  auto device = parse_layer_config(
+      "[[source]]\ntype = \"glove\"\ninput = \"device\"\ncalibration = \"/c.toml\"\nhand_length_m = 0.2\n", "g.toml");
+  ASSERT_TRUE(device.ok()) << device.error().message;
+  EXPECT_EQ(device->sources[0].calibration, "/c.toml");
+  EXPECT_DOUBLE_EQ(device->sources[0].hand_length_m, 0.2);
 }

@@ -29,6 +29,7 @@
 #include "proprio/openxr_layer/loader_interfaces.hpp"
 #include "proprio/openxr_layer/xr_ext.hpp"
 #include "proprio/sim/sim_hand_source.hpp"
+#include "proprio/glove/glove_board_source.hpp"
 #include "proprio/glove_eval/glove_evaluation.hpp"
 #include "proprio/vist/vist_hand_source.hpp"
 
@@ -170,12 +171,32 @@ Result<std::unique_ptr<HandSource>> make_vist_source(const SourceConfig& sc, con
   return std::unique_ptr<HandSource>(std::move(*source));
 }
 
-// The stretch glove on a simulated subject, streamed in real time.
+// The stretch glove: a read-out board on USB, or a simulated wearer streamed in real time.
 Result<std::unique_ptr<HandSource>> make_glove_source(const SourceConfig& sc, const LayerConfig& config) {
+  const std::string model_path = sc.model.empty() ? std::string(PROPRIO_DEFAULT_GLOVE_MODEL) : sc.model;
+  if (sc.input == "device") {
+    auto layout = sc.layout.empty() ? Result<StretchGloveLayout>(StretchGloveLayout::thesis_default())
+                                    : StretchGloveLayout::load(sc.layout);
+    if (!layout) return layout.error();
+    auto calibration = glove::MinMaxCalibration::load(sc.calibration);
+    if (!calibration) return calibration.error();
+    auto model = glove::OnnxPoseModel::load(model_path, *layout);
+    if (!model) return model.error();
+    glove::GloveHandSourceOptions o;
+    o.tracker.hand = sc.hands.front();
+    o.tracker.hand_length_m = sc.hand_length_m;
+    o.tracker.hand_width_m = sc.hand_width_m;
+    o.history.max_prediction_ns = config.max_prediction_ns;
+    auto board = glove::GloveBoardSource::start(
+        std::make_unique<devices::HidapiTransport>(devices::stretch_board_selector()), *layout,
+        std::move(*calibration), std::move(*model), o);
+    if (!board) return board.error();
+    return std::unique_ptr<HandSource>(std::move(*board));
+  }
   glove_eval::SimGloveSourceOptions o;
   o.subject = sc.subject;
   o.seed = sc.seed;
-  o.model = sc.model.empty() ? std::string(PROPRIO_DEFAULT_GLOVE_MODEL) : sc.model;
+  o.model = model_path;
   if (!sc.layout.empty()) {
     auto layout = StretchGloveLayout::load(sc.layout);
     if (!layout) return layout.error();

@@ -141,9 +141,24 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
   s.T_space_source = {so3_exp(*r * (M_PI / 180.0)), *p};
 
   if (s.type == SourceType::glove) {
-    auto input = choose<std::string>(c, "input", "sim", {{"sim", std::string("sim")}});
+    auto input =
+        choose<std::string>(c, "input", "sim", {{"sim", std::string("sim")}, {"device", std::string("device")}});
     if (!input) return input.error().with_context(where);
     s.input = *input;
+    if (s.input == "device") {
+      auto cal = c.get_string("calibration");
+      if (!cal) {
+        return cal.error().with_context(where + " (a glove read-out board needs the wearer's calibration: run "
+                                                "'proprio calibrate glove --out FILE' and name FILE here)");
+      }
+      s.calibration = *cal;
+      auto length = c.get_double_or("hand_length_m", 0.19, 0.12, 0.26);
+      if (!length) return length.error().with_context(where);
+      s.hand_length_m = *length;
+      auto width = c.get_double_or("hand_width_m", 0.10, 0.06, 0.14);
+      if (!width) return width.error().with_context(where);
+      s.hand_width_m = *width;
+    }
     auto subject = c.get_int_or("subject", 3, 0, 14);
     if (!subject) return subject.error().with_context(where);
     s.subject = static_cast<int>(*subject);

@@ -50,10 +50,14 @@ struct SourceConfig {
   bool loop = true;
 
   // glove: the stretch-sensing glove. input "sim" = simulated subject
-  // (subject, seed above); the model and layout default to the shipped ones.
+  // (subject, seed above); "device" = a read-out board on USB, with the
+  // wearer's min-max calibration file. The model and layout default to the
+  // shipped ones.
   std::string input = "sim";
-  std::string model;   // .onnx with its .json sidecar
-  std::string layout;  // glove layout TOML; empty: the built-in thesis-like glove
+  std::string model;        // .onnx with its .json sidecar
+  std::string layout;       // glove layout TOML; empty: the built-in thesis-like glove
+  std::string calibration;  // input "device": from `proprio calibrate glove`
+  double hand_length_m = 0.19, hand_width_m = 0.10;  // input "device": the wearer's hand
 
   std::string describe() const;
 };

@@ -239,7 +239,8 @@ TEST(GloveBoardSource, TracksThroughTheEmulatedBoardAndSurvivesAnUnplug) {
 
   auto wait_for_poses = [&](std::uint64_t more) {
     const auto target = (*source)->stats().poses_published + more;
-    for (int i = 0; i < 300 && (*source)->stats().poses_published < target; ++i) {
+    // Generous: sanitizer builds run the pipeline several times slower.
+    for (int i = 0; i < 1000 && (*source)->stats().poses_published < target; ++i) {
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
     return (*source)->stats().poses_published >= target;

@@ -116,6 +116,52 @@ TEST(StretchGloveSim, SpreadingStretchesTheWebs) {
   EXPECT_GT(c2[cell("thumb_index_web")], 1.1 * c0[cell("thumb_index_web")]);
 }
 
+TEST(StretchGloveSim, WristFlexionStretchesTheDorsumNearTheStrap) {
+  auto sim = make_sim();
+  const HandAngles rest = ExplorationMotion::relaxed();
+  const auto straight = capacitances(sim, rest);
+  std::vector<double> flexed(straight.size());
+  sim.cell_capacitances(rest, flexed, WristAngles{deg_to_rad(35.0), 0.0});
+  const std::size_t near = cell("dorsum_proximal_along_2"), far = cell("dorsum_distal_along_2");
+  EXPECT_GT(flexed[near] - straight[near], 0.03 * straight[near]);
+  EXPECT_GT(flexed[near] - straight[near], 2.0 * (flexed[far] - straight[far]));
+  // The fingers feel only the glove's tension.
+  const std::size_t mcp = cell("index_mcp_along");
+  EXPECT_GT(flexed[mcp], straight[mcp]);
+  EXPECT_LT(flexed[mcp] - straight[mcp], 0.3 * (flexed[near] - straight[near]));
+  // Radial deviation: the ulnar side of the dorsum stretches, the radial side less.
+  std::vector<double> radial(straight.size());
+  sim.cell_capacitances(rest, radial, WristAngles{0.0, deg_to_rad(18.0)});
+  EXPECT_GT(radial[cell("dorsum_across_4")] - straight[cell("dorsum_across_4")],
+            radial[cell("dorsum_across_0")] - straight[cell("dorsum_across_0")]);
+}
+
+TEST(StretchGloveSim, TheGloveCreepsWithinASession) {
+  auto run = [](bool creep) {
+    StretchGloveSimOptions o = StretchGloveSimOptions::ideal();
+    o.enable_creep = creep;
+    o.creep_per_sqrt_s_m = 1e-3;
+    auto sim = make_sim(o);
+    std::vector<double> first, later;
+    for (int k = 0; k < 4 * 960; ++k) {
+      const double v = sim.measure(ExplorationMotion::relaxed()).capacitance_pf;
+      if (k < 182) first.push_back(v);
+      if (k >= 3 * 960 && k < 3 * 960 + 182) later.push_back(v);
+    }
+    // Compare the same combinations: 3 * 960 is not a multiple of 182.
+    std::vector<double> a(182), b(182);
+    for (int k = 0; k < 182; ++k) {
+      a[static_cast<std::size_t>(k)] = first[static_cast<std::size_t>(k)];
+      b[static_cast<std::size_t>((3 * 960 + k) % 182)] = later[static_cast<std::size_t>(k)];
+    }
+    double diff = 0.0;
+    for (int k = 0; k < 182; ++k) diff = std::max(diff, std::abs(a[static_cast<std::size_t>(k)] - b[static_cast<std::size_t>(k)]));
+    return diff;
+  };
+  EXPECT_EQ(run(false), 0.0);
+  EXPECT_GT(run(true), 0.01);
+}
+
 TEST(StretchGloveSim, BiggerHandStretchesMore) {
   auto small = make_sim(StretchGloveSimOptions::ideal(), 0);
   auto big = make_sim(StretchGloveSimOptions::ideal(), kSimSubjectCount - 1);

@@ -37,6 +37,9 @@ import os
 import sys
 import time
 
+# Before numpy/torch load an OpenMP runtime: see training.py.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 import numpy as np
 
 import dataset as ds

@@ -22,8 +22,9 @@ U-Net, Table C.1, with these readings and adaptations (see README.md):
     written, 2.16 M that ever touch data; the thesis text's "13M" cannot come
     from this table). The default is width 16 (333 k as written, 137 k live):
     OpenCV 4.6 needs about 100 us per frame for it on one core, within the 200
-    us budget, and the thesis found 3 M vs 13 M vs 50 M within 0.2 deg
-    (Tables 5.4-5.5) on far more data than a simulator run gives us.
+    us budget (width 32: 300 us, width 64: 1.4 ms), and the thesis found 3 M
+    vs 13 M vs 50 M within 0.2 deg (Tables 5.4-5.5) on far more data than a
+    simulator run gives us.
 The final Tanh of Table C.1 is kept; it is scaled per output cell to the range
 the training angles cover (plus a margin), so the net outputs radians directly
 and empty output cells are exactly 0.

@@ -14,6 +14,9 @@ import os
 import sys
 import time
 
+# Before numpy/torch load an OpenMP runtime: see training.py.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 import numpy as np
 
 import dataset as ds
@@ -24,7 +27,7 @@ import training
 def select_sessions(data, subjects=None, exclude_subjects=None, sessions=None):
     """Session indices of the chosen subjects (all if None), minus excluded subjects, within `sessions` if given."""
     chosen = []
-    for s, sess in enumerate(data.sessions):
+    for s in range(len(data.sessions)):
         subject_ids = set(int(v) for v in np.unique(data.subject[data.session == s]))
         if subjects is not None and not subject_ids & set(subjects):
             continue

@@ -5,7 +5,6 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
-#include <limits>
 #include <span>
 #include <sstream>
 
@@ -338,7 +337,8 @@ Result<OnnxPoseModel> OnnxPoseModel::load(const std::filesystem::path& onnx_path
   } catch (const cv::Exception& e) {
     return make_error(Errc::unsupported, where + ": a dry run failed (OpenCV: " + e.err + "); " + expected);
   }
-  if (out.depth() != CV_32F || out.total() != kPoseOutputSize || (out.dims > 0 && out.size[0] != 1)) {
+  if (out.depth() != CV_32F || out.total() != kPoseOutputSize || !out.isContinuous() ||
+      (out.dims > 0 && out.size[0] != 1)) {
     std::string dims;
     for (int d = 0; d < out.dims; ++d) dims += (d ? ", " : "") + std::to_string(out.size[d]);
     return make_error(Errc::unsupported, where + ": the output has shape [" + dims + "]; " + expected);

@@ -1,7 +1,6 @@
 #include "proprio/core/stretch_glove_layout.hpp"
 
 #include <Eigen/LU>
-#include <Eigen/QR>
 #include <algorithm>
 #include <array>
 #include <cmath>

@@ -191,8 +191,9 @@ TEST(VistHandSource, ServesTheSessionLiveWhileConsumersQueryIt) {
 
 TEST(VistHandSource, ABoundedQueueDropsTheOldestInputWhenFlooded) {
   VistHandSourceOptions o;
+  o.max_queued_inputs = 4;
+  EXPECT_FALSE(VistHandSource::create(GloveDescription::vist_default(), o));
   o.max_queued_inputs = 16;
-  EXPECT_FALSE(VistHandSource::create(GloveDescription::vist_default(), VistHandSourceOptions{.max_queued_inputs = 4}));
   auto source = VistHandSource::create(GloveDescription::vist_default(), o);
   ASSERT_TRUE(source);
   TimedImuSample s;

@@ -205,6 +205,11 @@ namespace {
 // link, measuring the simulated glove on a still hand, read by StretchDevice
 // into the pipeline; the cable is pulled and put back.
 TEST(GloveBoardSource, TracksThroughTheEmulatedBoardAndSurvivesAnUnplug) {
+#ifdef __SANITIZE_ADDRESS__
+  // The emulated board streams in real time (960 measurements/s); the ASan
+  // build's read-out cannot keep up, so this runs in the main suite only.
+  GTEST_SKIP() << "real-time board emulation is too slow under AddressSanitizer";
+#endif
   const auto layout = StretchGloveLayout::thesis_default();
   const int subject_id = 11;
   auto cal = glove_eval::calibrate_simulated(layout, subject_id, 1, 30.0);

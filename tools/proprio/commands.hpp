@@ -1,5 +1,8 @@
 #pragma once
 #include <CLI/CLI.hpp>
+#include <cstdio>
+
+#include "proprio/core/result.hpp"
 
 namespace proprio::cli {
 
@@ -12,6 +15,12 @@ inline CLI::App* subcommand_group(CLI::App& app, const std::string& name, const 
   CLI::App* sub = app.add_subcommand(name, description);
   sub->require_subcommand(1);
   return sub;
+}
+
+// Prints "error: <message>" to stderr and returns the exit code 1.
+inline int report_error(const Error& error) {
+  std::fprintf(stderr, "error: %s\n", error.message.c_str());
+  return 1;
 }
 
 // Each registers its subcommand; the callback runs it and sets the exit code.
@@ -31,6 +40,9 @@ void add_stretch_glove_commands(CLI::App& app, int& exit_code);
 void add_stretch_board_command(CLI::App& app, int& exit_code);
 // `layer install|uninstall|status|init-config` and `xr-probe`: built when the
 // OpenXR layer is part of the build (PROPRIO_HAVE_OPENXR_LAYER).
+// `haptics sim|mjcf|devices|test` and `bench haptics`.
+void add_haptics_commands(CLI::App& app, int& exit_code);
+void add_haptics_device_commands(CLI::App& haptics, int& exit_code);
 void add_layer_commands(CLI::App& app, int& exit_code);
 void add_xr_probe_command(CLI::App& app, int& exit_code);
 

@@ -1,0 +1,821 @@
+#include "proprio/haptics/contact_sim.hpp"
+
+#include <mujoco/mujoco.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <iomanip>
+#include <mutex>
+#include <sstream>
+#include <vector>
+
+#include "proprio/core/log.hpp"
+
+namespace proprio::haptics {
+
+// ---------------------------------------------------------------------------
+// Options.
+
+std::string CouplingOptions::describe() const {
+  std::ostringstream s;
+  s << "coupling: wrist weld tau " << wrist_time_constant_s * 1e3 << " ms, zeta " << wrist_damping_ratio
+    << ", impedance " << wrist_impedance << ", leash " << wrist_max_offset_m * 1e3 << " mm / "
+    << rad_to_deg(wrist_max_offset_rad) << " deg, resync beyond " << resync_distance_m * 1e3 << " mm; joints k "
+    << joint_stiffness_nm_per_rad << " N m/rad, c " << joint_damping_nms_per_rad << " N m s/rad, armature "
+    << joint_armature_kg_m2 << " kg m^2, torque limit " << joint_max_torque_nm << " N m";
+  return s.str();
+}
+
+namespace {
+
+Status bad_option(const std::string& name, const std::string& rule, double value) {
+  std::ostringstream s;
+  s << "haptics option " << name << " = " << value << ": " << rule;
+  return make_error(Errc::invalid_argument, s.str());
+}
+
+bool finite_positive(double v) { return std::isfinite(v) && v > 0.0; }
+
+}  // namespace
+
+Status CouplingOptions::validate() const {
+  if (!finite_positive(wrist_time_constant_s)) return bad_option("wrist_time_constant_s", "must be > 0 s", wrist_time_constant_s);
+  if (!finite_positive(wrist_damping_ratio)) return bad_option("wrist_damping_ratio", "must be > 0", wrist_damping_ratio);
+  if (!(wrist_impedance > 0.0 && wrist_impedance < 1.0)) {
+    return bad_option("wrist_impedance", "must be in (0, 1) (MuJoCo solimp)", wrist_impedance);
+  }
+  if (!finite_positive(wrist_max_offset_m)) return bad_option("wrist_max_offset_m", "must be > 0 m", wrist_max_offset_m);
+  if (!finite_positive(wrist_max_offset_rad)) return bad_option("wrist_max_offset_rad", "must be > 0 rad", wrist_max_offset_rad);
+  if (!(std::isfinite(resync_distance_m) && resync_distance_m >= 0.0)) {
+    return bad_option("resync_distance_m", "must be >= 0 m (0 disables)", resync_distance_m);
+  }
+  if (!finite_positive(joint_stiffness_nm_per_rad)) return bad_option("joint_stiffness_nm_per_rad", "must be > 0", joint_stiffness_nm_per_rad);
+  if (!(std::isfinite(joint_damping_nms_per_rad) && joint_damping_nms_per_rad >= 0.0)) {
+    return bad_option("joint_damping_nms_per_rad", "must be >= 0", joint_damping_nms_per_rad);
+  }
+  if (!(std::isfinite(joint_armature_kg_m2) && joint_armature_kg_m2 >= 0.0)) {
+    return bad_option("joint_armature_kg_m2", "must be >= 0", joint_armature_kg_m2);
+  }
+  if (!finite_positive(joint_max_torque_nm)) return bad_option("joint_max_torque_nm", "must be > 0 N m", joint_max_torque_nm);
+  return {};
+}
+
+std::string ContactSimOptions::describe() const {
+  std::ostringstream s;
+  s << "contact sim: step " << timestep_s * 1e3 << " ms, Newton solver, elliptic cone, impratio " << impratio
+    << ", " << solver_iterations << " iterations, multiccd " << (multiccd ? "on" : "off") << "; contacts tau "
+    << contact_time_constant_s * 1e3 << " ms, impedance " << contact_impedance_min << " -> " << contact_impedance_max
+    << " over " << contact_impedance_width_m * 1e3 << " mm; fingertip force filter " << force_filter_time_constant_s * 1e3
+    << " ms\n  " << coupling.describe();
+  return s.str();
+}
+
+Status ContactSimOptions::validate() const {
+  if (!(timestep_s >= 1e-4 && timestep_s <= 0.01)) return bad_option("timestep_s", "must be in [0.1, 10] ms", timestep_s);
+  if (auto s = coupling.validate(); !s) return s;
+  // MuJoCo clamps solref time constants below 2 timesteps (refsafe): say so
+  // instead of silently getting a softer simulation than configured.
+  if (!(coupling.wrist_time_constant_s >= 2.0 * timestep_s)) {
+    return bad_option("wrist_time_constant_s", "must be >= 2 timesteps (MuJoCo's stability floor)", coupling.wrist_time_constant_s);
+  }
+  if (!(contact_time_constant_s >= 2.0 * timestep_s)) {
+    return bad_option("contact_time_constant_s", "must be >= 2 timesteps (MuJoCo's stability floor)", contact_time_constant_s);
+  }
+  if (!(contact_impedance_min > 0.0 && contact_impedance_min <= contact_impedance_max && contact_impedance_max < 1.0)) {
+    return bad_option("contact_impedance_min/max", "need 0 < min <= max < 1", contact_impedance_min);
+  }
+  if (!finite_positive(contact_impedance_width_m)) return bad_option("contact_impedance_width_m", "must be > 0 m", contact_impedance_width_m);
+  if (!(impratio >= 1.0 && impratio <= 100.0)) return bad_option("impratio", "must be in [1, 100]", impratio);
+  if (solver_iterations < 1 || solver_iterations > 1000) {
+    return bad_option("solver_iterations", "must be in [1, 1000]", solver_iterations);
+  }
+  if (!finite_positive(hand_density_kg_m3)) return bad_option("hand_density_kg_m3", "must be > 0", hand_density_kg_m3);
+  if (!(force_filter_time_constant_s >= 0.0 && force_filter_time_constant_s <= 0.05)) {
+    return bad_option("force_filter_time_constant_s", "must be in [0, 50] ms", force_filter_time_constant_s);
+  }
+  return {};
+}
+
+// ---------------------------------------------------------------------------
+// MJCF generation.
+
+namespace {
+
+// Left hands mirror the right through the wrist frame's YZ plane (HandModel).
+Pose mirrored(const Pose& T) { return {Quat(T.q.w(), T.q.x(), -T.q.y(), -T.q.z()), Vec3(-T.p.x(), T.p.y(), T.p.z())}; }
+
+std::string finger_name(Finger f) {
+  static constexpr const char* kNames[] = {"thumb", "index", "middle", "ring", "little"};
+  return kNames[static_cast<std::size_t>(f)];
+}
+
+// Per DOF: the hinge's name.
+std::string dof_joint_name(std::size_t dof) { return "proxy_" + std::string(to_string(static_cast<HandDof>(dof))); }
+
+struct Mjcf {
+  std::ostringstream s;
+  Mjcf() { s << std::setprecision(9); }
+  Mjcf& vec(const Vec3& v) {
+    s << v.x() << ' ' << v.y() << ' ' << v.z();
+    return *this;
+  }
+  Mjcf& quat(const Quat& q) {
+    s << q.w() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z();
+    return *this;
+  }
+  Mjcf& pose_attrs(const Pose& T) {
+    s << " pos=\"";
+    vec(T.p);
+    s << "\" quat=\"";
+    quat(T.q);
+    s << '"';
+    return *this;
+  }
+  Mjcf& rgba(const std::array<float, 4>& c) {
+    s << " rgba=\"" << c[0] << ' ' << c[1] << ' ' << c[2] << ' ' << c[3] << '"';
+    return *this;
+  }
+};
+
+// Object geoms are in contact group 1 and touch everything; hand geoms
+// (contype 2) touch objects but not each other.
+constexpr const char* kObjectContact = R"( contype="1" conaffinity="3")";
+constexpr const char* kHandContact = R"( contype="2" conaffinity="1")";
+
+void half_cylinder_mesh(Mjcf& m, const SceneObject& o) {
+  // The +y half of a cylinder along z: a convex solid, so MuJoCo's convex
+  // hull collision is exact up to the tessellation (64 facets over 180 deg:
+  // the chord sits at most r(1 - cos(1.4 deg)) = 0.3 mm * r/1m inside).
+  constexpr int kArc = 64;
+  m.s << "    <mesh name=\"" << o.name << "_mesh\" vertex=\"";
+  for (int end = -1; end <= 1; end += 2) {
+    for (int i = 0; i <= kArc; ++i) {
+      const double a = M_PI * i / kArc;
+      m.vec(Vec3(o.radius_m * std::cos(a), o.radius_m * std::sin(a), end * o.half_length_m));
+      m.s << ' ';
+    }
+  }
+  m.s << "\"/>\n";
+}
+
+void object_geoms(Mjcf& m, const SceneObject& o, const std::string& indent) {
+  const auto common = [&](const std::string& geom_name) {
+    m.s << " name=\"" << geom_name << "\" friction=\"" << o.friction << " 0.005 0.0001\"" << kObjectContact;
+    m.rgba(o.rgba);
+  };
+  switch (o.shape) {
+    case ShapeKind::box:
+      m.s << indent << "<geom type=\"box\" size=\"";
+      m.vec(o.half_extents_m);
+      m.s << '"';
+      common(o.name);
+      m.s << "/>\n";
+      break;
+    case ShapeKind::sphere:
+      m.s << indent << "<geom type=\"sphere\" size=\"" << o.radius_m << '"';
+      common(o.name);
+      m.s << "/>\n";
+      break;
+    case ShapeKind::cylinder:
+    case ShapeKind::capsule:
+      m.s << indent << "<geom type=\"" << (o.shape == ShapeKind::cylinder ? "cylinder" : "capsule") << "\" size=\""
+          << o.radius_m << ' ' << o.half_length_m << '"';
+      common(o.name);
+      m.s << "/>\n";
+      break;
+    case ShapeKind::half_cylinder:
+      m.s << indent << "<geom type=\"mesh\" mesh=\"" << o.name << "_mesh\"";
+      common(o.name);
+      m.s << "/>\n";
+      break;
+    case ShapeKind::plate_with_hole: {
+      // A ring of boxes whose inner faces circumscribe the hole (a peg of the
+      // hole's radius fits exactly), reaching out to S*sqrt(2) so the four
+      // outer slabs beyond S close the plate without gaps at the diagonals.
+      const int n = o.hole_segments;
+      const double a = M_PI / n;
+      const double r = o.hole_radius_m;
+      const double slab_start = r + 0.01;
+      const double ring_out = slab_start * std::sqrt(2.0) + 0.002;
+      const double hz = o.half_extents_m.z();
+      const double radial_half = 0.5 * (ring_out - r);
+      const double tangential_half = ring_out * std::tan(a) + 0.001;
+      for (int i = 0; i < n; ++i) {
+        const double phi = 2.0 * a * i;
+        const Vec3 centre((r + radial_half) * std::cos(phi), (r + radial_half) * std::sin(phi), 0.0);
+        const Quat q(Eigen::AngleAxisd(phi, Vec3::UnitZ()));
+        m.s << indent << "<geom type=\"box\" size=\"" << radial_half << ' ' << tangential_half << ' ' << hz << '"';
+        m.pose_attrs({q, centre});
+        common(o.name + "_ring" + std::to_string(i));
+        m.s << "/>\n";
+      }
+      const double X = o.half_extents_m.x(), Y = o.half_extents_m.y();
+      const double S = slab_start;
+      struct Slab { Vec3 centre, half; };
+      const Slab slabs[] = {
+          {Vec3(-0.5 * (X + S), 0, 0), Vec3(0.5 * (X - S), Y, hz)},
+          {Vec3(0.5 * (X + S), 0, 0), Vec3(0.5 * (X - S), Y, hz)},
+          {Vec3(0, 0.5 * (Y + S), 0), Vec3(S, 0.5 * (Y - S), hz)},
+          {Vec3(0, -0.5 * (Y + S), 0), Vec3(S, 0.5 * (Y - S), hz)},
+      };
+      int k = 0;
+      for (const Slab& sl : slabs) {
+        m.s << indent << "<geom type=\"box\" size=\"";
+        m.vec(sl.half);
+        m.s << "\" pos=\"";
+        m.vec(sl.centre);
+        m.s << '"';
+        common(o.name + "_slab" + std::to_string(k++));
+        m.s << "/>\n";
+      }
+      break;
+    }
+  }
+}
+
+Status check_plate(const SceneObject& o) {
+  if (o.shape != ShapeKind::plate_with_hole) return {};
+  const double ring_out = (o.hole_radius_m + 0.01) * std::sqrt(2.0) + 0.002;
+  if (o.half_extents_m.x() < ring_out || o.half_extents_m.y() < ring_out) {
+    std::ostringstream s;
+    s << "scene object '" << o.name << "': the plate's half extents must be at least " << ring_out * 1e3
+      << " mm for a hole of radius " << o.hole_radius_m * 1e3 << " mm";
+    return make_error(Errc::invalid_argument, s.str());
+  }
+  return {};
+}
+
+}  // namespace
+
+Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, const HapticScene& scene,
+                                  const ContactSimOptions& o) {
+  if (auto s = o.validate(); !s) return s.error();
+  if (auto s = scene.validate(); !s) return s.error();
+  for (const auto& obj : scene.objects) {
+    if (auto s = check_plate(obj); !s) return s.error();
+  }
+  const HandShape& shape = hand_model.shape();
+  const JointLimits& limits = hand_model.limits();
+  const bool left = hand == Handedness::left;
+  const auto side = [&](const Pose& T) { return left ? mirrored(T) : T; };
+
+  Mjcf m;
+  m.s << "<mujoco model=\"proprio_haptics\">\n"
+      << "  <compiler angle=\"radian\" inertiafromgeom=\"auto\"/>\n"
+      << "  <option timestep=\"" << o.timestep_s << "\" integrator=\"Euler\" solver=\"Newton\" cone=\"elliptic\" impratio=\""
+      << o.impratio << "\" iterations=\"" << o.solver_iterations << "\" gravity=\"";
+  m.vec(scene.gravity_in_world);
+  m.s << "\">\n"
+      << "    <flag multiccd=\"" << (o.multiccd ? "enable" : "disable") << "\"/>\n"
+      << "  </option>\n"
+      << "  <size nconmax=\"400\" njmax=\"2400\" nstack=\"2000000\"/>\n"
+      << "  <default>\n"
+      << "    <geom condim=\"4\" solref=\"" << o.contact_time_constant_s << " 1\" solimp=\"" << o.contact_impedance_min
+      << ' ' << o.contact_impedance_max << ' ' << o.contact_impedance_width_m << "\"/>\n"
+      << "  </default>\n";
+
+  bool any_mesh = false;
+  for (const auto& obj : scene.objects) any_mesh |= obj.shape == ShapeKind::half_cylinder;
+  if (any_mesh) {
+    m.s << "  <asset>\n";
+    for (const auto& obj : scene.objects) {
+      if (obj.shape == ShapeKind::half_cylinder) half_cylinder_mesh(m, obj);
+    }
+    m.s << "  </asset>\n";
+  }
+
+  m.s << "  <worldbody>\n";
+  if (scene.floor_height_m) {
+    m.s << "    <geom name=\"floor\" type=\"plane\" size=\"0 0 1\" pos=\"0 " << *scene.floor_height_m
+        << " 0\" zaxis=\"0 1 0\" friction=\"0.8 0.005 0.0001\"" << kObjectContact << "/>\n";
+  }
+  for (const auto& obj : scene.objects) {
+    m.s << "    <body name=\"" << obj.name << '"';
+    m.pose_attrs(obj.T_world_object);
+    m.s << ">\n";
+    if (!obj.fixed) {
+      m.s << "      <freejoint name=\"" << obj.name << "_free\"/>\n";
+    }
+    object_geoms(m, obj, "      ");
+    if (!obj.fixed) {
+      // Geoms set the shape; mass is given, so scale the density to it.
+      m.s << "      <inertial pos=\"0 0 0\" mass=\"" << obj.mass_kg << "\" diaginertia=\"";
+      const double mass = obj.mass_kg;
+      Vec3 I;
+      switch (obj.shape) {
+        case ShapeKind::sphere: I.setConstant(0.4 * mass * obj.radius_m * obj.radius_m); break;
+        case ShapeKind::box: {
+          const Vec3 e = 2.0 * obj.half_extents_m;
+          I = mass / 12.0 * Vec3(e.y() * e.y() + e.z() * e.z(), e.x() * e.x() + e.z() * e.z(), e.x() * e.x() + e.y() * e.y());
+          break;
+        }
+        default: {  // cylinder-like along z
+          const double r2 = obj.radius_m * obj.radius_m, L = 2.0 * obj.half_length_m;
+          const double Ixy = mass * (3.0 * r2 + L * L) / 12.0;
+          I = Vec3(Ixy, Ixy, 0.5 * mass * r2);
+        }
+      }
+      m.vec(I);
+      m.s << "\"/>\n";
+    }
+    m.s << "    </body>\n";
+  }
+
+  // The coupling target, placed each step at the (leashed) tracked wrist.
+  m.s << "    <body name=\"target_wrist\" mocap=\"true\"/>\n";
+
+  // The proxy hand. Zero angles at the world origin; ContactSimulation places it.
+  const auto T_wrist_joint = hand_model.joint_poses_in_wrist(Handedness::right, HandAngles{});
+  auto joint_p = [&](HandJoint j) { return T_wrist_joint[index_of(j)].p; };
+  m.s << "    <body name=\"proxy_wrist\">\n"
+      << "      <freejoint name=\"proxy_root\"/>\n";
+  {
+    // The palm: a box from the wrist to the knuckles, as wide as index to little.
+    const Vec3 pi = joint_p(HandJoint::index_proximal), pl = joint_p(HandJoint::little_proximal);
+    const Vec3 pm = joint_p(HandJoint::middle_proximal);
+    const double r = shape.fingers[1].joint_radius_m[1];
+    const Vec3 centre(0.5 * (pi.x() + pl.x()), 0.0, 0.5 * pm.z());
+    const Vec3 half(0.5 * std::abs(pi.x() - pl.x()) + r, 0.6 * shape.palm_radius_m, 0.5 * std::abs(pm.z()));
+    m.s << "      <geom name=\"proxy_palm\" type=\"box\" size=\"";
+    m.vec(half);
+    m.s << "\" pos=\"";
+    m.vec(left ? Vec3(-centre.x(), centre.y(), centre.z()) : centre);
+    m.s << "\" density=\"" << o.hand_density_kg_m3 << "\" friction=\"0.1 0.005 0.0001\"" << kHandContact
+        << " rgba=\"0.9 0.75 0.65 1\"/>\n";
+  }
+  const Vec3 abd_axis = left ? Vec3(0, -1, 0) : Vec3(0, 1, 0);
+  const auto hinge = [&](std::size_t dof, const Vec3& axis, const std::string& indent) {
+    m.s << indent << "<joint name=\"" << dof_joint_name(dof) << "\" type=\"hinge\" axis=\"";
+    m.vec(axis);
+    m.s << "\" limited=\"true\" range=\"" << limits.min_rad[dof] << ' ' << limits.max_rad[dof] << "\" damping=\""
+        << o.coupling.joint_damping_nms_per_rad << "\" armature=\"" << o.coupling.joint_armature_kg_m2 << "\"/>\n";
+  };
+  const auto segment = [&](const std::string& name, double length, double radius, const std::string& indent) {
+    m.s << indent << "<geom name=\"" << name << "\" type=\"capsule\" fromto=\"0 0 0 0 0 " << -length << "\" size=\""
+        << radius << "\" density=\"" << o.hand_density_kg_m3 << "\" friction=\"0.1 0.005 0.0001\"" << kHandContact
+        << " rgba=\"0.9 0.75 0.65 1\"/>\n";
+  };
+  const Vec3 flex_axis(-1, 0, 0);  // flexion is a negative rotation about +X (HandModel)
+  for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+    const auto f = static_cast<Finger>(fi);
+    const HandShape::Finger& g = shape.fingers[fi];
+    const std::size_t d = first_dof_of(f);
+    const std::string fname = finger_name(f);
+    const auto radius = [&](std::size_t k) { return 0.5 * (g.joint_radius_m[k] + g.joint_radius_m[k + 1]); };
+    std::string indent = "      ";
+    std::size_t bones_open = 0;
+    if (f == Finger::thumb) {
+      // Metacarpal (CMC: abduction then flexion), proximal (MCP), distal (IP).
+      static constexpr const char* kBones[] = {"metacarpal", "proximal", "distal"};
+      for (std::size_t k = 0; k < 3; ++k) {
+        const Pose T_local = k == 0 ? side(Pose{g.q_wrist_metacarpal_rest, g.p_base_in_wrist})
+                                    : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[k - 1])};
+        m.s << indent << "<body name=\"proxy_" << fname << '_' << kBones[k] << '"';
+        m.pose_attrs(T_local);
+        m.s << ">\n";
+        indent += "  ";
+        if (k == 0) {
+          hinge(d + 1, abd_axis, indent);
+          hinge(d + 0, flex_axis, indent);
+        } else {
+          hinge(d + 1 + k, flex_axis, indent);
+        }
+        segment("proxy_" + fname + '_' + kBones[k], g.bone_length_m[k], radius(k), indent);
+        ++bones_open;
+      }
+    } else {
+      // The metacarpal is inside the palm box; proximal (MCP: abduction then
+      // flexion), intermediate (PIP), distal (DIP).
+      static constexpr const char* kBones[] = {"proximal", "intermediate", "distal"};
+      const Quat q_rest = g.q_wrist_metacarpal_rest;
+      const Pose T_wrist_proximal{q_rest, g.p_base_in_wrist + q_rest * Vec3(0, 0, -g.bone_length_m[0])};
+      for (std::size_t k = 0; k < 3; ++k) {
+        const Pose T_local = k == 0 ? side(T_wrist_proximal) : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[k])};
+        m.s << indent << "<body name=\"proxy_" << fname << '_' << kBones[k] << '"';
+        m.pose_attrs(T_local);
+        m.s << ">\n";
+        indent += "  ";
+        if (k == 0) {
+          hinge(d + 1, abd_axis, indent);
+          hinge(d + 0, flex_axis, indent);
+        } else {
+          hinge(d + 1 + k, flex_axis, indent);
+        }
+        segment("proxy_" + fname + '_' + kBones[k], g.bone_length_m[k + 1], radius(k + 1), indent);
+        ++bones_open;
+      }
+    }
+    while (bones_open-- > 0) {
+      indent.resize(indent.size() - 2);
+      m.s << indent << "</body>\n";
+    }
+  }
+  m.s << "    </body>\n"
+      << "  </worldbody>\n";
+
+  const CouplingOptions& c = o.coupling;
+  m.s << "  <equality>\n"
+      << "    <weld name=\"wrist_coupling\" body1=\"proxy_wrist\" body2=\"target_wrist\" solref=\"" << c.wrist_time_constant_s
+      << ' ' << c.wrist_damping_ratio << "\" solimp=\"" << c.wrist_impedance << ' ' << c.wrist_impedance
+      << " 0.001\"/>\n"
+      << "  </equality>\n"
+      << "  <actuator>\n";
+  for (std::size_t dof = 0; dof < kHandDofCount; ++dof) {
+    m.s << "    <position name=\"" << dof_joint_name(dof) << "_servo\" joint=\"" << dof_joint_name(dof) << "\" kp=\""
+        << c.joint_stiffness_nm_per_rad << "\" ctrllimited=\"true\" ctrlrange=\"" << limits.min_rad[dof] << ' '
+        << limits.max_rad[dof] << "\" forcelimited=\"true\" forcerange=\"" << -c.joint_max_torque_nm << ' '
+        << c.joint_max_torque_nm << "\"/>\n";
+  }
+  m.s << "  </actuator>\n"
+      << "</mujoco>\n";
+  return m.s.str();
+}
+
+// ---------------------------------------------------------------------------
+// The simulation.
+
+namespace {
+
+// MuJoCo reports warnings through a global hook; route them to our log once.
+void install_mujoco_log_hooks() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    mju_user_warning = [](const char* msg) { logger().warn("MuJoCo: {}", msg); };
+  });
+}
+
+struct ModelDeleter {
+  void operator()(mjModel* m) const noexcept { mj_deleteModel(m); }
+};
+struct DataDeleter {
+  void operator()(mjData* d) const noexcept { mj_deleteData(d); }
+};
+
+Result<std::unique_ptr<mjModel, ModelDeleter>> compile(const std::string& xml) {
+  // 2.2.2 has no mj_addBufferVFS: make an empty file and copy the text in.
+  // mjVFS is ~2 MB, hence the heap.
+  auto vfs = std::make_unique<mjVFS>();
+  mj_defaultVFS(vfs.get());
+  const char* kName = "proprio_haptics.xml";
+  if (mj_makeEmptyFileVFS(vfs.get(), kName, static_cast<int>(xml.size())) != 0) {
+    return make_error(Errc::io_error, "MuJoCo could not create its in-memory model file");
+  }
+  const int i = mj_findFileVFS(vfs.get(), kName);
+  std::memcpy(vfs->filedata[i], xml.data(), xml.size());
+  char error[1024] = "";
+  mjModel* m = mj_loadXML(kName, vfs.get(), error, sizeof(error));
+  mj_deleteVFS(vfs.get());
+  if (!m) {
+    return make_error(Errc::parse_error, std::string("MuJoCo rejected the generated scene: ") + error +
+                                             " (see ContactSimulation::mjcf() or `proprio haptics mjcf`)");
+  }
+  return std::unique_ptr<mjModel, ModelDeleter>(m);
+}
+
+Quat quat_from(const mjtNum* q) { return Quat(q[0], q[1], q[2], q[3]); }
+Vec3 vec_from(const mjtNum* v) { return Vec3(v[0], v[1], v[2]); }
+
+bool finite_pose(const Pose& T) { return T.p.allFinite() && T.q.coeffs().allFinite() && T.q.norm() > 0.5; }
+
+}  // namespace
+
+struct ContactSimulation::Impl {
+  ContactSimOptions options;
+  HandModel hand_model;
+  Handedness hand;
+  std::string xml;
+  std::unique_ptr<mjModel, ModelDeleter> model;
+  std::unique_ptr<mjData, DataDeleter> data;
+
+  int root_qpos = 0, root_dof = 0;
+  int mocap = 0;
+  std::array<int, kHandDofCount> dof_qpos{};
+  std::array<int, kHandDofCount> dof_actuator{};
+  std::array<int, kFingerCount> tip_body{};
+  std::vector<int> geom_finger;   // per geom: finger index, or -1
+  std::vector<bool> geom_hand;    // per geom: part of the proxy
+  std::vector<int> hand_bodies;   // gravity compensation
+  std::vector<int> object_body_of_geom;  // per geom: scene body id, or -1
+
+  Pose target_wrist;
+  HandAngles target_angles{};
+  std::array<FingertipContact, kFingerCount> tips{};
+  ContactSimStats stats;
+  std::uint64_t rejected_targets = 0;
+  std::array<int, mjNWARNING> warnings_seen{};
+
+  Impl(ContactSimOptions o, const HandModel& hm, Handedness h) : options(std::move(o)), hand_model(hm), hand(h) {}
+
+  void write_hand_state(const Pose& T_world_wrist, const HandAngles& angles) {
+    mjtNum* qpos = data->qpos + root_qpos;
+    for (int k = 0; k < 3; ++k) qpos[k] = T_world_wrist.p[k];
+    const Quat q = T_world_wrist.q.normalized();
+    qpos[3] = q.w();
+    qpos[4] = q.x();
+    qpos[5] = q.y();
+    qpos[6] = q.z();
+    const HandAngles clamped = hand_model.limits().clamp(angles);
+    for (std::size_t i = 0; i < kHandDofCount; ++i) data->qpos[dof_qpos[i]] = clamped[i];
+    for (int k = 0; k < 6; ++k) data->qvel[root_dof + k] = 0.0;
+    for (std::size_t i = 0; i < kHandDofCount; ++i) {
+      data->qvel[model->jnt_dofadr[model->actuator_trnid[2 * dof_actuator[i]]]] = 0.0;
+    }
+  }
+
+  Pose proxy_wrist() const {
+    const mjtNum* qpos = data->qpos + root_qpos;
+    return {quat_from(qpos + 3).normalized(), vec_from(qpos)};
+  }
+
+  // The leash: the weld pulls toward a point at most max_offset from the proxy.
+  void place_target() {
+    const Pose proxy = proxy_wrist();
+    Vec3 offset = target_wrist.p - proxy.p;
+    bool leashed = false;
+    const double dist = offset.norm();
+    if (dist > options.coupling.wrist_max_offset_m) {
+      offset *= options.coupling.wrist_max_offset_m / dist;
+      leashed = true;
+    }
+    Quat q = target_wrist.q;
+    const double angle = proxy.q.angularDistance(target_wrist.q);
+    if (angle > options.coupling.wrist_max_offset_rad) {
+      q = proxy.q.slerp(options.coupling.wrist_max_offset_rad / angle, target_wrist.q);
+      leashed = true;
+    }
+    if (leashed) ++stats.leash_engaged_steps;
+    const Vec3 p = proxy.p + offset;
+    for (int k = 0; k < 3; ++k) data->mocap_pos[3 * mocap + k] = p[k];
+    data->mocap_quat[4 * mocap + 0] = q.w();
+    data->mocap_quat[4 * mocap + 1] = q.x();
+    data->mocap_quat[4 * mocap + 2] = q.y();
+    data->mocap_quat[4 * mocap + 3] = q.z();
+  }
+
+  bool hand_touches_anything() const {
+    for (int i = 0; i < data->ncon; ++i) {
+      const mjContact& c = data->contact[i];
+      if (geom_hand[static_cast<std::size_t>(c.geom1)] || geom_hand[static_cast<std::size_t>(c.geom2)]) return true;
+    }
+    return false;
+  }
+
+  void compensate_gravity() {
+    for (int b : hand_bodies) {
+      const double mass = model->body_mass[b];
+      for (int k = 0; k < 3; ++k) data->xfrc_applied[6 * b + k] = -mass * model->opt.gravity[k];
+    }
+  }
+
+  void update_fingertips() {
+    std::array<Vec3, kFingerCount> f_world;
+    f_world.fill(Vec3::Zero());
+    std::array<int, kFingerCount> count{};
+    std::array<double, kFingerCount> depth{};
+    for (int i = 0; i < data->ncon; ++i) {
+      const mjContact& c = data->contact[i];
+      const int f1 = geom_finger[static_cast<std::size_t>(c.geom1)];
+      const int f2 = geom_finger[static_cast<std::size_t>(c.geom2)];
+      if (f1 < 0 && f2 < 0) continue;
+      mjtNum local[6];
+      mj_contactForce(model.get(), data.get(), i, local);
+      // The contact frame's rows are normal, tangent 1, tangent 2; the normal
+      // points from geom1 to geom2 and the force acts on geom2 (-f on geom1).
+      Vec3 f = Vec3::Zero();
+      for (int r = 0; r < 3; ++r) f += local[r] * Vec3(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
+      const auto add = [&](int finger, const Vec3& force) {
+        const auto fi = static_cast<std::size_t>(finger);
+        f_world[fi] += force;
+        ++count[fi];
+        depth[fi] = std::max(depth[fi], -c.dist);
+      };
+      if (f2 >= 0) add(f2, f);
+      if (f1 >= 0) add(f1, -f);
+    }
+    const double dt = options.timestep_s, tau = options.force_filter_time_constant_s;
+    const double alpha = dt / (tau + dt);
+    for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+      FingertipContact& tip = tips[fi];
+      const Quat q_world_tip = quat_from(data->xquat + 4 * tip_body[fi]);
+      tip.f_in_world = f_world[fi];
+      tip.raw = FingertipForce::from_tip_frame(q_world_tip.conjugate() * f_world[fi]);
+      tip.force.normal_n += alpha * (tip.raw.normal_n - tip.force.normal_n);
+      tip.force.shear_x_n += alpha * (tip.raw.shear_x_n - tip.force.shear_x_n);
+      tip.force.shear_z_n += alpha * (tip.raw.shear_z_n - tip.force.shear_z_n);
+      tip.contact_count = count[fi];
+      tip.max_penetration_m = depth[fi];
+    }
+  }
+
+  int body_of(std::string_view name) const {
+    char buf[256];
+    if (name.size() >= sizeof(buf)) return -1;
+    std::memcpy(buf, name.data(), name.size());
+    buf[name.size()] = '\0';
+    return mj_name2id(model.get(), mjOBJ_BODY, buf);
+  }
+};
+
+Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model, Handedness hand,
+                                                    const HapticScene& scene, const ContactSimOptions& options) {
+  install_mujoco_log_hooks();
+  auto xml = generate_mjcf(hand_model, hand, scene, options);
+  if (!xml) return xml.error();
+  auto model = compile(*xml);
+  if (!model) return model.error();
+  auto impl = std::make_unique<Impl>(options, hand_model, hand);
+  impl->xml = std::move(*xml);
+  impl->model = std::move(*model);
+  impl->data.reset(mj_makeData(impl->model.get()));
+  if (!impl->data) return make_error(Errc::io_error, "MuJoCo could not allocate its simulation data");
+  const mjModel* m = impl->model.get();
+
+  const int root_joint = mj_name2id(m, mjOBJ_JOINT, "proxy_root");
+  impl->root_qpos = m->jnt_qposadr[root_joint];
+  impl->root_dof = m->jnt_dofadr[root_joint];
+  impl->mocap = m->body_mocapid[mj_name2id(m, mjOBJ_BODY, "target_wrist")];
+  for (std::size_t dof = 0; dof < kHandDofCount; ++dof) {
+    const std::string name = dof_joint_name(dof);
+    impl->dof_qpos[dof] = m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, name.c_str())];
+    impl->dof_actuator[dof] = mj_name2id(m, mjOBJ_ACTUATOR, (name + "_servo").c_str());
+  }
+  impl->geom_finger.assign(static_cast<std::size_t>(m->ngeom), -1);
+  impl->geom_hand.assign(static_cast<std::size_t>(m->ngeom), false);
+  impl->object_body_of_geom.assign(static_cast<std::size_t>(m->ngeom), -1);
+  for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+    const std::string distal = "proxy_" + finger_name(static_cast<Finger>(fi)) + "_distal";
+    impl->tip_body[fi] = mj_name2id(m, mjOBJ_BODY, distal.c_str());
+    impl->geom_finger[static_cast<std::size_t>(mj_name2id(m, mjOBJ_GEOM, distal.c_str()))] = static_cast<int>(fi);
+  }
+  const int proxy_root_body = mj_name2id(m, mjOBJ_BODY, "proxy_wrist");
+  for (int b = 1; b < m->nbody; ++b) {
+    // A proxy body is the root or any body under it.
+    int r = b;
+    while (r != 0 && r != proxy_root_body) r = m->body_parentid[r];
+    if (r == proxy_root_body) impl->hand_bodies.push_back(b);
+  }
+  for (int g = 0; g < m->ngeom; ++g) {
+    const int b = m->geom_bodyid[g];
+    const bool is_hand = std::find(impl->hand_bodies.begin(), impl->hand_bodies.end(), b) != impl->hand_bodies.end();
+    impl->geom_hand[static_cast<std::size_t>(g)] = is_hand;
+    if (!is_hand && b != 0) impl->object_body_of_geom[static_cast<std::size_t>(g)] = b;
+  }
+  for (int k = 0; k < mjNWARNING; ++k) impl->warnings_seen[static_cast<std::size_t>(k)] = impl->data->warning[k].number;
+
+  ContactSimulation sim(std::move(impl));
+  sim.reset_hand(Pose{Quat::Identity(), Vec3(0.0, 1.2, -0.3)}, HandAngles{});
+  return sim;
+}
+
+ContactSimulation::ContactSimulation(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ContactSimulation::ContactSimulation(ContactSimulation&&) noexcept = default;
+ContactSimulation& ContactSimulation::operator=(ContactSimulation&&) noexcept = default;
+ContactSimulation::~ContactSimulation() = default;
+
+const std::string& ContactSimulation::mjcf() const { return impl_->xml; }
+
+void ContactSimulation::reset_hand(const Pose& T_world_wrist, const HandAngles& angles) noexcept {
+  Impl& s = *impl_;
+  if (!finite_pose(T_world_wrist)) {
+    ++s.rejected_targets;
+    return;
+  }
+  s.target_wrist = {T_world_wrist.q.normalized(), T_world_wrist.p};
+  s.target_angles = s.hand_model.limits().clamp(angles);
+  s.write_hand_state(s.target_wrist, s.target_angles);
+  for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[s.dof_actuator[i]] = s.target_angles[i];
+  s.place_target();
+  mj_forward(s.model.get(), s.data.get());
+  for (auto& tip : s.tips) tip = FingertipContact{};
+}
+
+void ContactSimulation::set_target(const Pose& T_world_wrist, const HandAngles& angles) noexcept {
+  Impl& s = *impl_;
+  bool finite = finite_pose(T_world_wrist);
+  for (double a : angles) finite &= std::isfinite(a);
+  if (!finite) {
+    ++s.rejected_targets;
+    return;
+  }
+  s.target_wrist = {T_world_wrist.q.normalized(), T_world_wrist.p};
+  s.target_angles = s.hand_model.limits().clamp(angles);
+}
+
+void ContactSimulation::step() noexcept {
+  Impl& s = *impl_;
+  const CouplingOptions& c = s.options.coupling;
+  if (c.resync_distance_m > 0.0 && (s.target_wrist.p - s.proxy_wrist().p).norm() > c.resync_distance_m &&
+      !s.hand_touches_anything()) {
+    s.write_hand_state(s.target_wrist, s.target_angles);
+    ++s.stats.resyncs;
+  }
+  for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[s.dof_actuator[i]] = s.target_angles[i];
+  s.place_target();
+  s.compensate_gravity();
+  mj_step(s.model.get(), s.data.get());
+  ++s.stats.steps;
+
+  // MuJoCo resets the whole state itself on a bad qacc/qpos; put the hand
+  // back where the user's is, and count it.
+  bool reset = false;
+  for (int k : {mjWARN_BADQACC, mjWARN_BADQPOS, mjWARN_BADQVEL}) {
+    if (s.data->warning[k].number != s.warnings_seen[static_cast<std::size_t>(k)]) {
+      s.warnings_seen[static_cast<std::size_t>(k)] = s.data->warning[k].number;
+      reset = true;
+    }
+  }
+  if (reset) {
+    ++s.stats.instability_resets;
+    s.write_hand_state(s.target_wrist, s.target_angles);
+    mj_forward(s.model.get(), s.data.get());
+  }
+  s.update_fingertips();
+  s.stats.last_contact_count = s.data->ncon;
+}
+
+TimeNs ContactSimulation::time_ns() const noexcept {
+  return static_cast<TimeNs>(std::llround(impl_->data->time * 1e9));
+}
+Handedness ContactSimulation::hand() const noexcept { return impl_->hand; }
+const HandModel& ContactSimulation::hand_model() const noexcept { return impl_->hand_model; }
+
+Pose ContactSimulation::proxy_wrist() const noexcept { return impl_->proxy_wrist(); }
+
+HandAngles ContactSimulation::proxy_angles() const noexcept {
+  HandAngles a;
+  for (std::size_t i = 0; i < kHandDofCount; ++i) a[i] = impl_->data->qpos[impl_->dof_qpos[i]];
+  return a;
+}
+
+HandPose ContactSimulation::proxy_pose(TimeNs time_ns) const {
+  return impl_->hand_model.forward(impl_->hand, proxy_angles(), proxy_wrist(), time_ns);
+}
+
+const std::array<FingertipContact, kFingerCount>& ContactSimulation::fingertips() const noexcept { return impl_->tips; }
+const FingertipContact& ContactSimulation::fingertip(Finger finger) const noexcept {
+  return impl_->tips[static_cast<std::size_t>(finger)];
+}
+
+Result<Pose> ContactSimulation::object_pose(std::string_view name) const {
+  const Impl& s = *impl_;
+  const int b = s.body_of(name);
+  if (b <= 0 || std::find(s.hand_bodies.begin(), s.hand_bodies.end(), b) != s.hand_bodies.end()) {
+    return make_error(Errc::not_found, "no scene object named '" + std::string(name) + "'");
+  }
+  return Pose{quat_from(s.data->xquat + 4 * b), vec_from(s.data->xpos + 3 * b)};
+}
+
+Status ContactSimulation::place_object(std::string_view name, const Pose& T_world_object) {
+  Impl& s = *impl_;
+  const int b = s.body_of(name);
+  if (b <= 0) return make_error(Errc::not_found, "no scene object named '" + std::string(name) + "'");
+  const mjModel* m = s.model.get();
+  if (m->body_jntnum[b] != 1 || m->jnt_type[m->body_jntadr[b]] != mjJNT_FREE) {
+    return make_error(Errc::invalid_argument, "scene object '" + std::string(name) + "' is fixed; only free objects move");
+  }
+  if (!finite_pose(T_world_object)) return make_error(Errc::invalid_argument, "object pose must be finite");
+  const int j = m->body_jntadr[b];
+  mjtNum* qpos = s.data->qpos + m->jnt_qposadr[j];
+  const Quat q = T_world_object.q.normalized();
+  for (int k = 0; k < 3; ++k) qpos[k] = T_world_object.p[k];
+  qpos[3] = q.w();
+  qpos[4] = q.x();
+  qpos[5] = q.y();
+  qpos[6] = q.z();
+  for (int k = 0; k < 6; ++k) s.data->qvel[m->jnt_dofadr[j] + k] = 0.0;
+  mj_forward(m, s.data.get());
+  return {};
+}
+
+Vec3 ContactSimulation::hand_force_on_object(std::string_view name) const {
+  const Impl& s = *impl_;
+  const int b = s.body_of(name);
+  Vec3 total = Vec3::Zero();
+  if (b <= 0) return total;
+  for (int i = 0; i < s.data->ncon; ++i) {
+    const mjContact& c = s.data->contact[i];
+    const auto g1 = static_cast<std::size_t>(c.geom1), g2 = static_cast<std::size_t>(c.geom2);
+    const bool obj1 = s.object_body_of_geom[g1] == b, obj2 = s.object_body_of_geom[g2] == b;
+    if (!((obj1 && s.geom_hand[g2]) || (obj2 && s.geom_hand[g1]))) continue;
+    mjtNum local[6];
+    mj_contactForce(s.model.get(), s.data.get(), i, local);
+    Vec3 f = Vec3::Zero();
+    for (int r = 0; r < 3; ++r) f += local[r] * Vec3(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
+    total += obj2 ? f : Vec3(-f);
+  }
+  return total;
+}
+
+ContactSimStats ContactSimulation::stats() const noexcept { return impl_->stats; }
+const ContactSimOptions& ContactSimulation::options() const noexcept { return impl_->options; }
+
+std::string ContactSimulation::describe_model() const {
+  const mjModel* m = impl_->model.get();
+  std::ostringstream s;
+  s << m->nbody << " bodies, " << m->ngeom << " geoms, " << m->nv << " DOFs, " << m->nu << " joint servos; "
+    << impl_->options.describe();
+  return s.str();
+}
+
+}  // namespace proprio::haptics

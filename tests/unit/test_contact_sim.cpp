@@ -1,0 +1,338 @@
+// The MuJoCo contact simulation: the proxy hand's structure, coupling
+// stability, contact forces against analytic expectations, and tunnelling.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "proprio/haptics/contact_sim.hpp"
+#include "proprio/haptics/force_laws.hpp"
+#include "proprio/haptics/touch_script.hpp"
+
+namespace proprio::haptics {
+namespace {
+
+HandModel test_hand() {
+  auto shape = HandShape::from_measurements(0.19, 0.09);
+  EXPECT_TRUE(shape);
+  return HandModel(*shape);
+}
+
+HapticScene empty_scene() {
+  HapticScene s;
+  s.floor_height_m.reset();
+  return s;
+}
+
+// A slightly curled hand, so every joint is away from zero.
+HandAngles curled() {
+  HandAngles a{};
+  for (std::size_t i = 0; i < kHandDofCount; ++i) {
+    a[i] = is_abduction(static_cast<HandDof>(i)) ? 0.05 : 0.3;
+  }
+  return a;
+}
+
+double max_joint_error(const HandPose& a, const HandPose& b) {
+  double e = 0;
+  for (double x : joint_position_errors(a, b)) e = std::max(e, x);
+  return e;
+}
+
+TEST(ContactSim, ProxyHasTheKinematicHandsStructureForBothHands) {
+  const HandModel model = test_hand();
+  for (Handedness hand : {Handedness::right, Handedness::left}) {
+    auto sim = ContactSimulation::create(model, hand, empty_scene());
+    ASSERT_TRUE(sim) << sim.error().message;
+    const Pose T_world_wrist{Quat(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized())), Vec3(0.1, 1.1, -0.3)};
+    sim->reset_hand(T_world_wrist, curled());
+    const HandPose expected = model.forward(hand, curled(), T_world_wrist, 0);
+    const HandPose proxy = sim->proxy_pose(0);
+    EXPECT_LT(max_joint_error(proxy, expected), 1e-9) << to_string(hand);
+    // Joint frames too: the fingertip frame is what forces are expressed in.
+    for (std::size_t j = 0; j < kHandJointCount; ++j) {
+      EXPECT_LT(proxy.T_world_joint[j].q.angularDistance(expected.T_world_joint[j].q), 1e-9)
+          << to_string(hand) << " " << to_string(joint_at(j));
+    }
+  }
+}
+
+TEST(ContactSim, FollowsTheTrackedHandInFreeSpace) {
+  auto sim = ContactSimulation::create(test_hand(), Handedness::right, empty_scene());
+  ASSERT_TRUE(sim) << sim.error().message;
+  const Pose start{Quat::Identity(), Vec3(0, 1.2, -0.3)};
+  sim->reset_hand(start, HandAngles{});
+  // 10 cm/s sideways while curling the fingers over 1 s, then hold 0.5 s.
+  for (int i = 0; i < 1500; ++i) {
+    const double t = std::min(1.0, i * 1e-3);
+    HandAngles a = curled();
+    for (double& x : a) x *= t;
+    sim->set_target(Pose{Quat::Identity(), start.p + Vec3(0.1 * t, 0, 0)}, a);
+    sim->step();
+  }
+  const HandPose expected = test_hand().forward(Handedness::right, curled(), Pose{Quat::Identity(), start.p + Vec3(0.1, 0, 0)}, 0);
+  EXPECT_LT(max_joint_error(sim->proxy_pose(0), expected), 0.002);
+  EXPECT_EQ(sim->stats().instability_resets, 0u);
+}
+
+// Impulses on every DOF, for gain sets across the documented range: the
+// motion must stay bounded and die out (no energy growth at 1 kHz).
+TEST(ContactSim, CouplingIsStableAndDampedAcrossTheGainRange) {
+  struct Gains { double wrist_tau, joint_k; };
+  for (const Gains g : {Gains{0.005, 0.1}, Gains{0.005, 2.0}, Gains{0.02, 0.5}, Gains{0.1, 0.1}, Gains{0.1, 2.0}}) {
+    ContactSimOptions o;
+    o.coupling.wrist_time_constant_s = g.wrist_tau;
+    o.coupling.joint_stiffness_nm_per_rad = g.joint_k;
+    o.coupling.joint_damping_nms_per_rad = 2.0 * std::sqrt(g.joint_k * o.coupling.joint_armature_kg_m2);
+    auto sim = ContactSimulation::create(test_hand(), Handedness::right, empty_scene(), o);
+    ASSERT_TRUE(sim) << sim.error().message;
+    const Pose T{Quat::Identity(), Vec3(0, 1.2, -0.3)};
+    sim->reset_hand(T, curled());
+    sim->set_target(T, curled());
+    // The impulse: the tracked hand jumps 1.5 cm and 0.3 rad per joint for one step.
+    HandAngles kicked = curled();
+    for (double& x : kicked) x += 0.3;
+    sim->set_target(Pose{T.q, T.p + Vec3(0.015, 0.0, 0.0)}, kicked);
+    sim->step();
+    sim->set_target(T, curled());
+    const HandPose rest = test_hand().forward(Handedness::right, curled(), T, 0);
+    double early = 0, late = 0;
+    for (int i = 0; i < 1500; ++i) {
+      sim->step();
+      const double e = max_joint_error(sim->proxy_pose(0), rest);
+      ASSERT_TRUE(std::isfinite(e));
+      ASSERT_LT(e, 0.05) << "wrist tau " << g.wrist_tau << " joint k " << g.joint_k << " step " << i;
+      if (i < 100) early = std::max(early, e);
+      if (i >= 1300) late = std::max(late, e);
+    }
+    EXPECT_LT(late, 0.1 * early + 1e-4) << "wrist tau " << g.wrist_tau << " joint k " << g.joint_k;
+    EXPECT_EQ(sim->stats().instability_resets, 0u);
+  }
+}
+
+// The hand palm up, a 20 g block resting on the index fingertip's pad: the
+// pad must carry exactly the block's weight, along its normal.
+TEST(ContactSim, FingertipUnderAWeightFeelsItAlongThePadNormal) {
+  const HandModel model = test_hand();
+  // Palm up: the back of the hand (+Y) faces the floor, fingers point forward (-z).
+  const Pose T_world_wrist{Quat(Eigen::AngleAxisd(M_PI, Vec3::UnitZ())), Vec3(0, 1.0, -0.3)};
+  const HandPose pose = model.forward(Handedness::right, HandAngles{}, T_world_wrist, 0);
+  const Vec3 p_dip = pose.joint(HandJoint::index_distal).p, p_tip = pose.joint(HandJoint::index_tip).p;
+  const double r = 0.5 * (pose.radius_m[index_of(HandJoint::index_distal)] + pose.radius_m[index_of(HandJoint::index_tip)]);
+  const double mass = 0.02;
+  HapticScene scene = empty_scene();
+  // Short enough to rest on the distal segment alone, clear of the
+  // intermediate segment's rounded end at the DIP joint.
+  SceneObject block = SceneObject::box("block", Vec3(0.004, 0.003, 0.004),
+                                       Pose{Quat::Identity(), p_dip + 0.65 * (p_tip - p_dip) + Vec3(0, r + 0.003 + 0.0005, 0)});
+  block.fixed = false;
+  block.mass_kg = mass;
+  scene.objects.push_back(block);
+  auto sim = ContactSimulation::create(model, Handedness::right, scene);
+  ASSERT_TRUE(sim) << sim.error().message;
+  sim->reset_hand(T_world_wrist, HandAngles{});
+  for (int i = 0; i < 1000; ++i) sim->step();
+  const FingertipContact& tip = sim->fingertip(Finger::index);
+  const double weight = mass * 9.81;
+  EXPECT_NEAR(tip.force.normal_n, weight, 0.03 * weight);
+  EXPECT_LT(tip.force.shear_magnitude_n(), 0.05 * weight);
+  EXPECT_GT(tip.contact_count, 0);
+  EXPECT_LT(tip.max_penetration_m, 0.002);
+  for (Finger f : {Finger::thumb, Finger::middle, Finger::ring, Finger::little}) {
+    EXPECT_EQ(sim->fingertip(f).force.normal_n, 0.0) << static_cast<int>(f);
+  }
+  // The block is still on the finger.
+  auto block_pose = sim->object_pose("block");
+  ASSERT_TRUE(block_pose);
+  EXPECT_NEAR(block_pose->p.y(), block.T_world_object.p.y(), 0.006);  // the finger's servos give a little
+}
+
+// Fingertips pressed onto a table and dragged: shear opposes the motion and
+// stays inside the friction cone.
+TEST(ContactSim, SlidingGivesShearOpposingTheMotionWithinTheFrictionCone) {
+  const HandModel model = test_hand();
+  // The touch script's pointing hand: index straight, pitched down, the
+  // other fingers curled away, so only the index tip meets the table.
+  const TouchScript script(model, Handedness::right);
+  Pose T0;
+  HandAngles pointing;
+  script.at(0.0, T0, pointing);
+  const HandPose pose = model.forward(Handedness::right, pointing, T0, 0);
+  double lowest = 1e9;
+  for (std::size_t j = 0; j < kHandJointCount; ++j) lowest = std::min(lowest, pose.T_world_joint[j].p.y() - pose.radius_m[j]);
+  const double mu = 0.6;
+  HapticScene scene = empty_scene();
+  SceneObject table = SceneObject::box("table", Vec3(0.5, 0.02, 0.5), Pose{Quat::Identity(), Vec3(0, lowest - 0.02, -0.3)});
+  table.friction = mu;
+  scene.objects.push_back(table);
+  auto sim = ContactSimulation::create(model, Handedness::right, scene);
+  ASSERT_TRUE(sim) << sim.error().message;
+  sim->reset_hand(T0, pointing);
+  // Press 1 cm down, settle, then slide along +x at 5 cm/s.
+  const Pose pressed{T0.q, T0.p - Vec3(0, 0.01, 0)};
+  for (int i = 0; i < 300; ++i) {
+    sim->set_target(pressed, pointing);
+    sim->step();
+  }
+  int touching = 0, sliding_samples = 0;
+  for (int i = 0; i < 600; ++i) {
+    sim->set_target(Pose{pressed.q, pressed.p + Vec3(0.05 * i * 1e-3, 0, 0)}, pointing);
+    sim->step();
+    if (i < 200) continue;  // static friction breaking loose
+    const FingertipContact& tip = sim->fingertip(Finger::index);
+    if (tip.contact_count == 0) continue;  // stick-slip can lift the tip for a step
+    ++touching;
+    const Vec3 f = tip.f_in_world;
+    const double normal = f.y();
+    const Vec3 tangential(f.x(), 0, f.z());
+    ASSERT_GT(normal, 0.0);
+    EXPECT_LE(tangential.norm(), mu * normal * 1.02 + 1e-6) << "step " << i;
+    EXPECT_LT(f.x(), 0.0) << "shear must oppose the +x motion, step " << i;
+    if (tangential.norm() > 0.8 * mu * normal) ++sliding_samples;
+  }
+  EXPECT_GT(touching, 360);
+  // Kinetic friction: the force sits at the cone's edge while sliding.
+  EXPECT_GT(sliding_samples, touching * 3 / 4);
+}
+
+TEST(ContactSim, ProxyNeverTunnelsThroughAThinPlate) {
+  const HandModel model = test_hand();
+  const Pose T0{Quat::Identity(), Vec3(0, 1.1, -0.3)};
+  HapticScene scene = empty_scene();
+  const double top = 1.05;
+  scene.objects.push_back(SceneObject::box("plate", Vec3(0.4, 0.01, 0.4), Pose{Quat::Identity(), Vec3(0, top - 0.01, -0.3)}));
+  auto sim = ContactSimulation::create(model, Handedness::right, scene);
+  ASSERT_TRUE(sim) << sim.error().message;
+  sim->reset_hand(T0, HandAngles{});
+  // The tracked hand goes 30 cm down, through the plate, in 0.5 s, and stays there.
+  double worst = 1e9;
+  for (int i = 0; i < 2000; ++i) {
+    const double t = std::min(1.0, i / 500.0);
+    sim->set_target(Pose{T0.q, T0.p - Vec3(0, 0.3 * t, 0)}, HandAngles{});
+    sim->step();
+    const HandPose p = sim->proxy_pose(0);
+    for (std::size_t j = 0; j < kHandJointCount; ++j) {
+      if (j == index_of(HandJoint::palm) || j == index_of(HandJoint::wrist)) continue;
+      worst = std::min(worst, p.T_world_joint[j].p.y() - p.radius_m[j] - top);
+    }
+  }
+  EXPECT_GT(worst, -0.003) << "deepest proxy penetration";
+  EXPECT_GT(sim->stats().leash_engaged_steps, 1000u);
+  EXPECT_GT(sim->proxy_wrist().p.y(), top);
+}
+
+TEST(ContactSim, PegInHoleSceneIsStable) {
+  auto sim = ContactSimulation::create(test_hand(), Handedness::right, HapticScene::peg_in_hole());
+  ASSERT_TRUE(sim) << sim.error().message;
+  auto start = sim->object_pose("peg");
+  ASSERT_TRUE(start);
+  for (int i = 0; i < 1000; ++i) sim->step();
+  auto end = sim->object_pose("peg");
+  ASSERT_TRUE(end);
+  EXPECT_LT((end->p - start->p).norm(), 0.002);
+  EXPECT_LT(end->q.angularDistance(start->q), 0.01);
+  EXPECT_FALSE(sim->object_pose("table")->p.hasNaN());
+  EXPECT_FALSE(sim->object_pose("nothing"));
+  EXPECT_FALSE(sim->place_object("table", Pose{}));
+  EXPECT_TRUE(sim->place_object("peg", *start));
+}
+
+// A peg a little narrower than the hole slides through it under gravity
+// (the hole's axis tilted down); one wider than the hole cannot enter.
+TEST(ContactSim, TightHoleAdmitsOnlyAPegThatFits) {
+  for (const double clearance : {0.001, -0.003}) {
+    HapticScene scene = empty_scene();
+    const double hole_r = 0.02;
+    // The hole's axis (object z) tilted below horizontal: 60 degrees for the
+    // peg that fits; 80 for the one that does not, whose plate face is then
+    // only 10 degrees off level, so it rests on the rim instead of sliding off.
+    const Quat q_axis = Quat(Eigen::AngleAxisd(deg_to_rad(clearance > 0 ? 60.0 : 80.0), Vec3::UnitX()));
+    scene.objects.push_back(SceneObject::plate_with_hole("plate", hole_r, Vec3(0.08, 0.08, 0.02), Pose{q_axis, Vec3(0, 1, 0)}));
+    SceneObject peg = SceneObject::cylinder("peg", hole_r - clearance, 0.04, Pose{q_axis, Vec3(0, 1, 0) + q_axis * Vec3(0, 0, -0.07)});
+    peg.fixed = false;
+    peg.mass_kg = 0.2;
+    peg.friction = 0.3;
+    scene.objects.push_back(peg);
+    auto sim = ContactSimulation::create(test_hand(), Handedness::right, scene);
+    ASSERT_TRUE(sim) << sim.error().message;
+    for (int i = 0; i < 1500; ++i) sim->step();
+    const Vec3 p = sim->object_pose("peg")->p;
+    const double along_axis = (q_axis.conjugate() * (p - Vec3(0, 1, 0))).z();
+    if (clearance > 0) {
+      EXPECT_GT(along_axis, 0.02) << "a fitting peg falls through the hole";
+    } else {
+      EXPECT_LT(along_axis, -0.055) << "an oversize peg stays out";
+    }
+  }
+}
+
+TEST(ContactSim, RejectsBadOptionsAndNonFiniteTargets) {
+  ContactSimOptions o;
+  o.coupling.wrist_time_constant_s = 0.001;  // below 2 timesteps
+  auto bad = ContactSimulation::create(test_hand(), Handedness::right, empty_scene(), o);
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.error().message.find("wrist_time_constant_s"), std::string::npos);
+
+  HapticScene dup = empty_scene();
+  dup.objects.push_back(SceneObject::sphere("a", 0.01, Pose{}));
+  dup.objects.push_back(SceneObject::sphere("a", 0.01, Pose{}));
+  auto twice = ContactSimulation::create(test_hand(), Handedness::right, dup);
+  ASSERT_FALSE(twice);
+  EXPECT_NE(twice.error().message.find("'a'"), std::string::npos);
+
+  auto sim = ContactSimulation::create(test_hand(), Handedness::right, empty_scene());
+  ASSERT_TRUE(sim);
+  const Pose before = sim->proxy_wrist();
+  HandAngles nan_angles{};
+  nan_angles[3] = std::nan("");
+  sim->set_target(Pose{Quat::Identity(), Vec3(1, 1, 1)}, nan_angles);
+  for (int i = 0; i < 100; ++i) sim->step();
+  EXPECT_LT((sim->proxy_wrist().p - before.p).norm(), 1e-6);
+}
+
+TEST(ForceLaws, HalfCylinderLawMatchesItsFormula) {
+  ContactLawOptions law;  // F0 0.45 N, K 4.2 N/m
+  HalfCylinderShape cyl;
+  cyl.T_world_object = Pose{Quat::Identity(), Vec3(0, 0.75, -0.55)};
+  const double r = 0.01;
+  // Straight above the axis, 2 cm deep: normal +y, F = 0.45 + 4.2 * 0.02.
+  const Quat q_pad_down = Quat::Identity();  // tip frame +Y up: the pad faces down onto the cylinder
+  auto c = sphere_on_half_cylinder(law, cyl, Vec3(0, 0.75 + 0.25 + r - 0.02, -0.55), r, q_pad_down);
+  ASSERT_TRUE(c.in_contact);
+  EXPECT_NEAR(c.penetration_m, 0.02, 1e-12);
+  EXPECT_NEAR(c.force.normal_n, 0.45 + 4.2 * 0.02, 1e-12);
+  EXPECT_NEAR(c.force.shear_magnitude_n(), 0.0, 1e-12);
+  // At 30 degrees around the curve, the same depth: the same magnitude, now
+  // split into normal and shear for a finger whose pad still faces down.
+  const double a = M_PI / 6;
+  const Vec3 radial(std::sin(a), std::cos(a), 0);
+  c = sphere_on_half_cylinder(law, cyl, cyl.T_world_object.p + (0.25 + r - 0.005) * radial, r, q_pad_down);
+  ASSERT_TRUE(c.in_contact);
+  const double F = 0.45 + 4.2 * 0.005;
+  EXPECT_NEAR(c.f_in_world.norm(), F, 1e-12);
+  EXPECT_NEAR(c.force.normal_n, F * std::cos(a), 1e-12);
+  EXPECT_NEAR(c.force.shear_x_n, F * std::sin(a), 1e-12);
+  // Not touching: nothing.
+  EXPECT_FALSE(sphere_on_half_cylinder(law, cyl, Vec3(0, 0.75 + 0.25 + r + 0.001, -0.55), r, q_pad_down).in_contact);
+  // Beyond the end cap: nothing.
+  EXPECT_FALSE(sphere_on_half_cylinder(law, cyl, Vec3(0, 0.99, -0.55 - 0.3), r, q_pad_down).in_contact);
+  // Saturation.
+  law.max_force_n = 0.5;
+  EXPECT_NEAR(sphere_on_half_cylinder(law, cyl, Vec3(0, 0.9, -0.55), r, q_pad_down).f_in_world.norm(), 0.5, 1e-12);
+  // NaN position: no contact rather than a NaN force.
+  EXPECT_FALSE(sphere_on_half_cylinder(law, cyl, Vec3(std::nan(""), 1, 0), r, q_pad_down).in_contact);
+}
+
+TEST(ForceLaws, PlaneLawAndValidation) {
+  ContactLawOptions law;
+  auto c = sphere_on_plane(law, Vec3(0, 1, 0), Vec3(0, 1, 0), Vec3(0, 1.005, 0), 0.01, Quat::Identity());
+  ASSERT_TRUE(c.in_contact);
+  EXPECT_NEAR(c.force.normal_n, 0.45 + 4.2 * 0.005, 1e-12);
+  ContactLawOptions bad;
+  bad.stiffness_n_per_m = -1;
+  auto s = bad.validate();
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.error().message.find("4.2 N/m"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace proprio::haptics

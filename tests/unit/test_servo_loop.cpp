@@ -1,0 +1,166 @@
+// The servo loop: forces flow from the contact simulation through the safety
+// gates and device models to the sinks; study conditions; shutdown zeroes.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <thread>
+
+#include "proprio/haptics/servo_loop.hpp"
+#include "proprio/haptics/touch_script.hpp"
+
+namespace proprio::haptics {
+namespace {
+
+std::shared_ptr<const FingertipDeviceModel> force_vector_device() {
+  auto m = load_device_model(PROPRIO_SOURCE_DIR "/config/haptics/force_vector.toml");
+  EXPECT_TRUE(m) << m.error().message;
+  return std::shared_ptr<const FingertipDeviceModel>(std::move(*m));
+}
+
+struct Rig {
+  HandModel model{*HandShape::from_measurements(0.19, 0.09)};
+  std::unique_ptr<ServoLoop> loop;
+  std::shared_ptr<RecordingSink> index_sink = std::make_shared<RecordingSink>();
+  std::unique_ptr<TouchScript> script;
+
+  explicit Rig(ServoLoopOptions options = {}) {
+    // A table whose top is where the script presses.
+    HapticScene scene;
+    scene.floor_height_m.reset();
+    scene.objects.push_back(SceneObject::box("table", Vec3(0.4, 0.02, 0.4), Pose{Quat::Identity(), Vec3(0, 0.98, -0.55)}));
+    auto sim = ContactSimulation::create(model, Handedness::right, scene);
+    EXPECT_TRUE(sim) << sim.error().message;
+    TouchScriptOptions to;
+    to.p_surface_in_world = Vec3(0, 1.0, -0.55);
+    script = std::make_unique<TouchScript>(sim->hand_model(), Handedness::right, to);
+    Pose T;
+    HandAngles a;
+    script->at(0.0, T, a);
+    sim->reset_hand(T, a);
+    ServoChannel c;
+    c.finger = Finger::index;
+    c.model = force_vector_device();
+    c.sink = index_sink;
+    std::vector<ServoChannel> channels;
+    channels.push_back(c);
+    auto l = ServoLoop::create(std::move(*sim), std::move(channels), options);
+    EXPECT_TRUE(l) << l.error().message;
+    loop = std::move(*l);
+  }
+
+  // Runs the touch script for [t0, t1) seconds of simulated time, 1 kHz.
+  void run(double t0, double t1) {
+    for (double t = t0; t < t1; t += 1e-3) {
+      const TimeNs now = static_cast<TimeNs>(t * 1e9) + kNsPerSecond;
+      Pose T;
+      HandAngles a;
+      script->at(t, T, a);
+      loop->submit_tracked_hand(now, T, a);
+      loop->tick(now);
+    }
+  }
+};
+
+TEST(ServoLoop, PressingTheTableReachesTheDeviceThroughTheGate) {
+  Rig rig;
+  rig.loop->engage(kNsPerSecond);
+  rig.run(0.0, 2.5);  // approach, press, slide halfway
+  const ServoSnapshot* snap = rig.loop->latest();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_GT(snap->contact[1].normal_n, 0.3) << "index presses the table";
+  EXPECT_NEAR(rig.index_sink->measured().normal_n, snap->contact[1].normal_n,
+              0.05 * snap->contact[1].normal_n + 0.02) << "the device gets the simulation's force, ramped in";
+  EXPECT_TRUE(rig.index_sink->last_enabled());
+  EXPECT_EQ(snap->channels[0].gate, GateState::active);
+  EXPECT_LE(rig.index_sink->measured().normal_n, rig.loop->gate(0).limits().max_normal_n);
+  // Sliding along +x: the finger is dragged back, shear opposes the motion.
+  EXPECT_GT(snap->proxy.joint(HandJoint::index_tip).p.y(), 0.999) << "the proxy stays on the table";
+}
+
+TEST(ServoLoop, WithoutHapticsTheDeviceGetsZeroWhileTheSimulationRuns) {
+  ServoLoopOptions o;
+  o.haptics_enabled = false;
+  Rig rig(o);
+  rig.loop->engage(kNsPerSecond);
+  rig.run(0.0, 2.0);
+  EXPECT_GT(rig.loop->latest()->contact[1].normal_n, 0.3);
+  EXPECT_EQ(rig.index_sink->measured().normal_n, 0.0);
+}
+
+TEST(ServoLoop, WithoutAbductionTheFingersDoNotSpread) {
+  ServoLoopOptions o;
+  o.remove_finger_abduction = true;
+  Rig rig(o);
+  HandAngles a{};
+  a[first_dof_of(Finger::index) + 1] = 0.3;
+  a[first_dof_of(Finger::thumb) + 1] = 0.3;
+  const Pose T{Quat::Identity(), Vec3(0, 1.3, -0.3)};
+  rig.loop->simulation().reset_hand(T, HandAngles{});
+  for (int i = 0; i < 300; ++i) {
+    rig.loop->submit_tracked_hand(kNsPerSecond + i * kNsPerMillisecond, T, a);
+    rig.loop->tick(kNsPerSecond + i * kNsPerMillisecond);
+  }
+  const HandAngles proxy = rig.loop->simulation().proxy_angles();
+  EXPECT_NEAR(proxy[first_dof_of(Finger::index) + 1], 0.0, 0.01);
+  EXPECT_NEAR(proxy[first_dof_of(Finger::thumb) + 1], 0.3, 0.02) << "the thumb keeps its CMC abduction";
+}
+
+TEST(ServoLoop, StaleOrBadHandsAreCountedAndTheProxyHolds) {
+  Rig rig;
+  rig.loop->engage(kNsPerSecond);
+  rig.run(0.0, 0.2);
+  HandPose inactive;
+  rig.loop->submit_tracked_hand(inactive);
+  Pose nan_pose{Quat::Identity(), Vec3(std::nan(""), 0, 0)};
+  rig.loop->submit_tracked_hand(0, nan_pose, HandAngles{});
+  const Pose before = rig.loop->simulation().proxy_wrist();
+  for (int i = 0; i < 500; ++i) rig.loop->tick(2 * kNsPerSecond + i * kNsPerMillisecond);
+  const ServoTiming t = rig.loop->timing();
+  EXPECT_EQ(t.rejected_hands, 2u);
+  EXPECT_GE(t.stale_hand_ticks, 300u);
+  EXPECT_LT((rig.loop->simulation().proxy_wrist().p - before.p).norm(), 0.01);
+}
+
+TEST(ServoLoop, ThreadRunsAndStopZeroesTheDevices) {
+  ServoLoopOptions o;
+  o.realtime_priority = false;
+  Rig rig(o);
+  ASSERT_TRUE(rig.loop->start());
+  EXPECT_FALSE(rig.loop->start());
+  // Feed the pressing pose from this thread, as a tracker would.
+  Pose T;
+  HandAngles a;
+  rig.script->at(1.5, T, a);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (rig.loop->timing().ticks < 300 && std::chrono::steady_clock::now() < deadline) {
+    rig.loop->submit_tracked_hand(MonotonicClock::instance().now_ns(), T, a);
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  rig.loop->stop();
+  EXPECT_FALSE(rig.loop->running());
+  EXPECT_GE(rig.loop->timing().ticks, 300u);
+  // The last thing each device heard: disabled, zero force, rest position.
+  EXPECT_FALSE(rig.index_sink->last_enabled());
+  EXPECT_EQ(rig.index_sink->measured().normal_n, 0.0);
+  EXPECT_EQ(rig.index_sink->measured().shear_magnitude_n(), 0.0);
+}
+
+TEST(ServoLoop, RejectsBadChannels) {
+  HandModel model{*HandShape::from_measurements(0.19, 0.09)};
+  HapticScene scene;
+  auto make = [&]() -> ContactSimulation {
+    auto sim = ContactSimulation::create(model, Handedness::right, scene);
+    return std::move(*sim);
+  };
+  std::vector<ServoChannel> none(1);
+  EXPECT_FALSE(ServoLoop::create(make(), none));
+  std::vector<ServoChannel> twice(2);
+  twice[0].model = twice[1].model = force_vector_device();
+  EXPECT_FALSE(ServoLoop::create(make(), twice));
+  ServoLoopOptions o;
+  o.period_ns = 0;
+  EXPECT_FALSE(ServoLoop::create(make(), {}, o));
+}
+
+}  // namespace
+}  // namespace proprio::haptics

@@ -1,0 +1,369 @@
+// proprio haptics sim|mjcf|devices|test and proprio bench haptics.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <thread>
+#include <vector>
+
+#include "commands.hpp"
+#include "proprio/core/log.hpp"
+#include "proprio/haptics/contact_sim.hpp"
+#include "proprio/haptics/device_model.hpp"
+#include "proprio/haptics/emulated_fingertip.hpp"
+#include "proprio/haptics/servo_loop.hpp"
+#include "proprio/haptics/touch_script.hpp"
+#include "svg_plot.hpp"
+
+namespace proprio::cli {
+namespace {
+
+using namespace proprio::haptics;
+
+#ifndef PROPRIO_SOURCE_DIR
+#define PROPRIO_SOURCE_DIR "."
+#endif
+
+struct SceneChoice {
+  HapticScene scene;
+  Vec3 p_touch_in_world;  // where the scripted index finger lands
+  // How deep a fingertip sphere is inside the touched surface (< 0: above it).
+  std::function<double(const Vec3&, double)> depth;
+};
+
+Result<SceneChoice> make_scene(const std::string& name) {
+  if (name == "half-cylinder") {
+    SceneChoice c{HapticScene::half_cylinder_study(), Vec3::Zero(), {}};
+    const SceneObject& cyl = *c.scene.find("half_cylinder");
+    c.p_touch_in_world = cyl.T_world_object.p + Vec3(0, cyl.radius_m, 0);
+    const Pose T = cyl.T_world_object;
+    const double R = cyl.radius_m;
+    c.depth = [T, R](const Vec3& p, double r) {
+      const Vec3 q = T.inverse() * p;
+      return R + r - std::hypot(q.x(), q.y());
+    };
+    return c;
+  }
+  if (name == "peg-in-hole") {
+    SceneChoice c{HapticScene::peg_in_hole(), Vec3::Zero(), {}};
+    const SceneObject& peg = *c.scene.find("peg");
+    c.p_touch_in_world = peg.T_world_object.p + Vec3(0, peg.half_length_m, 0);
+    const double top = c.p_touch_in_world.y();
+    c.depth = [top](const Vec3& p, double r) { return top - (p.y() - r); };
+    return c;
+  }
+  if (name == "table") {
+    SceneChoice c{HapticScene{}, Vec3(0, 1.0, -0.55), {}};
+    c.scene.objects.push_back(
+        SceneObject::box("table", Vec3(0.4, 0.02, 0.4), Pose{Quat::Identity(), Vec3(0, 0.98, -0.55)}));
+    c.depth = [](const Vec3& p, double r) { return 1.0 - (p.y() - r); };
+    return c;
+  }
+  return make_error(Errc::invalid_argument,
+                    "unknown scene '" + name + "': choose half-cylinder, peg-in-hole or table");
+}
+
+HandModel cli_hand(double length_m, double width_m) {
+  auto shape = HandShape::from_measurements(length_m, width_m);
+  return HandModel(shape ? *shape : HandShape{});
+}
+
+// ---------------------------------------------------------------------------
+// haptics sim
+
+struct SimArgs {
+  std::string scene = "half-cylinder";
+  std::string device = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml";
+  double seconds = 8.0;
+  double press_depth_m = 0.003;
+  double hand_length_m = 0.19, hand_width_m = 0.09;
+  std::string plot, csv;
+  bool json = false;
+};
+
+int run_sim(const SimArgs& a) {
+  auto scene = make_scene(a.scene);
+  if (!scene) return report_error(scene.error());
+  auto device = load_device_model(a.device);
+  if (!device) return report_error(device.error());
+  std::shared_ptr<const FingertipDeviceModel> model(std::move(*device));
+  const HandModel hand = cli_hand(a.hand_length_m, a.hand_width_m);
+  auto sim = ContactSimulation::create(hand, Handedness::right, scene->scene);
+  if (!sim) return report_error(sim.error());
+  TouchScriptOptions to;
+  to.p_surface_in_world = scene->p_touch_in_world;
+  to.press_depth_m = a.press_depth_m;
+  const TouchScript script(sim->hand_model(), Handedness::right, to);
+  Pose T;
+  HandAngles angles;
+  script.at(0.0, T, angles);
+  sim->reset_hand(T, angles);
+
+  auto emulated = EmulatedFingertip::create(model);
+  if (!emulated) return report_error(emulated.error());
+  std::shared_ptr<EmulatedFingertip> sink = std::move(*emulated);
+  std::vector<ServoChannel> channels(1);
+  channels[0].finger = Finger::index;
+  channels[0].model = model;
+  channels[0].sink = sink;
+  ServoLoopOptions so;
+  auto loop = ServoLoop::create(std::move(*sim), std::move(channels), so);
+  if (!loop) return report_error(loop.error());
+  ServoLoop& servo = **loop;
+  std::printf("Scene %s; device %s\n%s\n", a.scene.c_str(), std::string(model->kind()).c_str(),
+              servo.simulation().describe_model().c_str());
+
+  // Simulated time at 1 kHz, as fast as the machine goes.
+  const auto steps = static_cast<int>(a.seconds * 1000.0);
+  PlotSeries contact_n{"contact normal (simulation)", {}, {}}, contact_s{"contact shear |t|", {}, {}};
+  PlotSeries cmd_n{"commanded normal (after safety gate)", {}, {}}, meas_n{"emulated device FSR normal", {}, {}};
+  PlotSeries tracked_depth{"tracked fingertip", {}, {}}, proxy_depth{"proxy fingertip (contact penetration)", {}, {}};
+  std::ofstream csv;
+  if (!a.csv.empty()) {
+    csv.open(a.csv);
+    if (!csv) return report_error(make_error(Errc::io_error, "cannot write " + a.csv));
+    csv << "t_s,contact_normal_n,contact_shear_x_n,contact_shear_z_n,commanded_normal_n,commanded_shear_x_n,"
+           "commanded_shear_z_n,device_normal_n,tracked_depth_m,proxy_depth_m\n";
+  }
+  double peak = 0, max_tracked_depth = 0, max_proxy_depth = 0;
+  const TimeNs t0 = kNsPerSecond;
+  servo.engage(t0);
+  const auto wall_start = std::chrono::steady_clock::now();
+  for (int i = 0; i < steps; ++i) {
+    const double t = i * 1e-3;
+    const TimeNs now = t0 + static_cast<TimeNs>(i) * kNsPerMillisecond;
+    script.at(t, T, angles);
+    servo.submit_tracked_hand(now, T, angles);
+    servo.tick(now);
+    const ServoSnapshot* snap = servo.latest();
+    const FingertipForce c = snap->contact[static_cast<std::size_t>(Finger::index)];
+    const auto& ch = snap->channels[0];
+    const HandPose tracked = hand.forward(Handedness::right, angles, T, now);
+    const double r = tracked.radius_m[index_of(HandJoint::index_tip)];
+    const double tracked_below = scene->depth(tracked.joint(HandJoint::index_tip).p, r);
+    const double proxy_below = servo.simulation().fingertip(Finger::index).max_penetration_m;
+    peak = std::max(peak, c.normal_n);
+    max_tracked_depth = std::max(max_tracked_depth, tracked_below);
+    max_proxy_depth = std::max(max_proxy_depth, proxy_below);
+    if (i % 5 == 0) {
+      contact_n.x.push_back(t), contact_n.y.push_back(c.normal_n);
+      contact_s.x.push_back(t), contact_s.y.push_back(c.shear_magnitude_n());
+      cmd_n.x.push_back(t), cmd_n.y.push_back(ch.commanded.normal_n);
+      meas_n.x.push_back(t), meas_n.y.push_back(ch.measured.normal_n);
+      tracked_depth.x.push_back(t), tracked_depth.y.push_back(tracked_below * 1e3);
+      proxy_depth.x.push_back(t), proxy_depth.y.push_back(proxy_below * 1e3);
+    }
+    if (csv) {
+      csv << t << ',' << c.normal_n << ',' << c.shear_x_n << ',' << c.shear_z_n << ',' << ch.commanded.normal_n << ','
+          << ch.commanded.shear_x_n << ',' << ch.commanded.shear_z_n << ',' << ch.measured.normal_n << ','
+          << tracked_below << ',' << proxy_below << '\n';
+    }
+  }
+  servo.disengage_and_zero(t0 + static_cast<TimeNs>(steps) * kNsPerMillisecond);
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+
+  if (!a.plot.empty()) {
+    std::vector<PlotPanel> panels = {
+        {"Index fingertip force", "N", {contact_n, contact_s, cmd_n, meas_n}},
+        {"Index fingertip depth inside the surface (the proxy stays on it)", "mm", {tracked_depth, proxy_depth}},
+    };
+    if (auto s = write_svg_plot(a.plot, "proprio haptics sim: " + a.scene + ", " + std::string(model->kind()), "time (s)",
+                                panels);
+        !s) {
+      return report_error(s.error());
+    }
+  }
+  const auto stats = servo.simulation().stats();
+  if (a.json) {
+    nlohmann::json j;
+    j["scene"] = a.scene;
+    j["device"] = model->kind();
+    j["seconds"] = a.seconds;
+    j["peak_contact_normal_n"] = peak;
+    j["max_tracked_depth_m"] = max_tracked_depth;
+    j["max_proxy_depth_m"] = max_proxy_depth;
+    j["instability_resets"] = stats.instability_resets;
+    j["wall_s"] = wall_s;
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    std::printf(
+        "%.1f s simulated in %.2f s wall (%.1fx real time)\n"
+        "Index fingertip: peak contact normal force %.2f N; the tracked fingertip went %.1f mm into the surface, "
+        "the proxy %.1f mm (contact softness)\n"
+        "Device: %s\n",
+        a.seconds, wall_s, a.seconds / std::max(wall_s, 1e-9), peak, max_tracked_depth * 1e3, max_proxy_depth * 1e3,
+        sink->describe().c_str());
+    if (!a.plot.empty()) std::printf("Plot: %s\n", a.plot.c_str());
+  }
+  return stats.instability_resets == 0 ? 0 : 1;
+}
+
+// ---------------------------------------------------------------------------
+// bench haptics
+
+struct BenchArgs {
+  double seconds = 5.0;
+  bool json = false;
+  bool realtime = true;
+};
+
+struct Quantiles {
+  double p50 = 0, p99 = 0, max = 0;
+};
+Quantiles quantiles(std::vector<double> v) {
+  Quantiles q;
+  if (v.empty()) return q;
+  std::sort(v.begin(), v.end());
+  q.p50 = v[v.size() / 2];
+  q.p99 = v[std::min(v.size() - 1, v.size() * 99 / 100)];
+  q.max = v.back();
+  return q;
+}
+
+int run_bench(const BenchArgs& a) {
+  const HandModel hand = cli_hand(0.19, 0.09);
+  auto scene = make_scene("peg-in-hole");
+  auto device = load_device_model(std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/platform_3dof.toml");
+  if (!device) return report_error(device.error());
+  std::shared_ptr<const FingertipDeviceModel> model(std::move(*device));
+
+  // 1. MuJoCo steps with the index finger pressing on the standing peg.
+  auto sim = ContactSimulation::create(hand, Handedness::right, scene->scene);
+  if (!sim) return report_error(sim.error());
+  TouchScriptOptions to;
+  to.p_surface_in_world = scene->p_touch_in_world;
+  to.period_s = 1e9;  // hold the approach pose; lowered below
+  const TouchScript script(sim->hand_model(), Handedness::right, to);
+  Pose T;
+  HandAngles angles;
+  script.at(0.0, T, angles);
+  sim->reset_hand(T, angles);
+  T.p.y() -= to.approach_height_m + 0.01;
+  sim->set_target(T, angles);
+  for (int i = 0; i < 500; ++i) sim->step();
+  std::vector<double> step_us;
+  const int n = 5000;
+  step_us.reserve(n);
+  for (int i = 0; i < n; ++i) {
+    const auto s = std::chrono::steady_clock::now();
+    sim->step();
+    step_us.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - s).count());
+  }
+  const Quantiles step = quantiles(step_us);
+  const int contacts = sim->stats().last_contact_count;
+
+  // 2. The servo loop on its own thread for `seconds`, three channels.
+  std::vector<ServoChannel> channels;
+  for (Finger f : {Finger::thumb, Finger::index, Finger::middle}) {
+    ServoChannel c;
+    c.finger = f;
+    c.model = model;
+    c.sink = std::make_shared<RecordingSink>();
+    channels.push_back(std::move(c));
+  }
+  ServoLoopOptions so;
+  so.realtime_priority = a.realtime;
+  auto loop = ServoLoop::create(std::move(*sim), std::move(channels), so);
+  if (!loop) return report_error(loop.error());
+  if (auto s = (*loop)->start(); !s) return report_error(s.error());
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.seconds);
+  while (std::chrono::steady_clock::now() < end) {
+    (*loop)->submit_tracked_hand(MonotonicClock::instance().now_ns(), T, angles);
+    std::this_thread::sleep_for(std::chrono::milliseconds(11));  // a 90 Hz tracker
+  }
+  (*loop)->stop();
+  const ServoTiming timing = (*loop)->timing();
+  const unsigned cores = std::thread::hardware_concurrency();
+
+  if (a.json) {
+    nlohmann::json j;
+    j["mujoco_step_us"] = {{"p50", step.p50}, {"p99", step.p99}, {"max", step.max}, {"contacts", contacts}};
+    j["servo_tick_us"] = {{"p50", timing.tick_p50_us}, {"p99", timing.tick_p99_us}, {"max", timing.tick_max_us}};
+    j["servo_jitter_us"] = {{"p50", timing.jitter_p50_us}, {"p99", timing.jitter_p99_us}, {"max", timing.jitter_max_us}};
+    j["servo_ticks"] = timing.ticks;
+    j["servo_overruns"] = timing.overruns;
+    j["realtime_priority"] = timing.realtime;
+    j["cores"] = cores;
+    j["targets"] = {{"mujoco_step_us", 250}, {"servo_tick_us", 400}, {"jitter_p99_us", 200}};
+    std::printf("%s\n", j.dump(2).c_str());
+  } else {
+    std::printf(
+        "MuJoCo step, hand + peg-in-hole scene, index pressing the peg (%d contacts), %d steps:\n"
+        "  p50 %.0f us, p99 %.0f us, max %.0f us (target <= 250 us)\n"
+        "Servo loop, %.1f s on its own thread (%s), 3 devices (platform_3dof), %u cores:\n"
+        "  tick p50 %.0f us, p99 %.0f us, max %.0f us (target <= 400 us)\n"
+        "  wake-up jitter p50 %.0f us, p99 %.0f us, max %.0f us (target p99 <= 200 us on an idle machine)\n"
+        "  %llu ticks, %llu overruns\n"
+        "Percentiles of the servo loop come from 10 us bins (upper edges).\n",
+        contacts, n, step.p50, step.p99, step.max, a.seconds,
+        timing.realtime ? "SCHED_FIFO" : "normal priority: run as root or grant rtprio for less jitter", cores,
+        timing.tick_p50_us, timing.tick_p99_us, timing.tick_max_us, timing.jitter_p50_us, timing.jitter_p99_us,
+        timing.jitter_max_us, static_cast<unsigned long long>(timing.ticks),
+        static_cast<unsigned long long>(timing.overruns));
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_haptics_commands(CLI::App& app, int& exit_code) {
+  auto* h = subcommand_group(app, "haptics", "Contact simulation and fingertip haptic devices");
+
+  auto sim_args = std::make_shared<SimArgs>();
+  auto* s = h->add_subcommand(
+      "sim",
+      "Simulate a scripted index finger touching a scene (approach, press, slide, lift) through the proxy hand,\n"
+      "the safety gate and an emulated fingertip device (motor dynamics), and report the forces.");
+  s->add_option("--scene", sim_args->scene, "half-cylinder (the perception study's), peg-in-hole or table")
+      ->capture_default_str();
+  s->add_option("--device", sim_args->device, "device model TOML (config/haptics/*.toml)")->capture_default_str();
+  s->add_option("--seconds", sim_args->seconds, "simulated seconds (one touch every 4 s)")
+      ->check(CLI::Range(0.1, 600.0))
+      ->capture_default_str();
+  s->add_option("--press-depth", sim_args->press_depth_m, "how far below the surface the tracked fingertip goes (m)")
+      ->check(CLI::Range(0.0, 0.1))
+      ->capture_default_str();
+  s->add_option("--plot", sim_args->plot, "write an SVG plot of forces and depths");
+  s->add_option("--csv", sim_args->csv, "write every tick as CSV");
+  s->add_flag("--json", sim_args->json, "print the summary as JSON");
+  s->callback([sim_args, &exit_code] { exit_code = run_sim(*sim_args); });
+
+  auto mjcf_scene = std::make_shared<std::string>("peg-in-hole");
+  auto* m = h->add_subcommand("mjcf", "Print the MuJoCo model (proxy hand + scene) the simulation compiles");
+  m->add_option("--scene", *mjcf_scene, "half-cylinder, peg-in-hole or table")->capture_default_str();
+  m->callback([mjcf_scene, &exit_code] {
+    auto scene = make_scene(*mjcf_scene);
+    if (!scene) {
+      exit_code = report_error(scene.error());
+      return;
+    }
+    auto xml = generate_mjcf(cli_hand(0.19, 0.09), Handedness::right, scene->scene, ContactSimOptions{});
+    if (!xml) {
+      exit_code = report_error(xml.error());
+      return;
+    }
+    std::fputs(xml->c_str(), stdout);
+    exit_code = 0;
+  });
+
+  add_haptics_device_commands(*h, exit_code);
+
+  auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
+  auto bench_args = std::make_shared<BenchArgs>();
+  auto* b = bench->add_subcommand(
+      "haptics",
+      "Time the MuJoCo step (hand + peg-in-hole, pressing) and the 1 kHz servo loop on its own thread:\n"
+      "tick duration, wake-up jitter and overruns. Timings depend on the machine and its load.");
+  b->add_option("--seconds", bench_args->seconds, "how long the servo loop runs")
+      ->check(CLI::Range(0.5, 600.0))
+      ->capture_default_str();
+  b->add_flag("!--no-realtime", bench_args->realtime, "do not ask for SCHED_FIFO");
+  b->add_flag("--json", bench_args->json, "print the figures as JSON");
+  b->callback([bench_args, &exit_code] { exit_code = run_bench(*bench_args); });
+}
+
+}  // namespace proprio::cli

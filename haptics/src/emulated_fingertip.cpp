@@ -70,6 +70,12 @@ EmulatedFingertip::EmulatedFingertip(std::shared_ptr<const FingertipDeviceModel>
     : model_(std::move(model)), emulator_(std::move(emulator)) {}
 
 void EmulatedFingertip::send(const MotorAngles& motors, const FingertipForce&, bool enabled, TimeNs now) noexcept {
+  // The emulator's time starts at its boot: boot it at the first command, or
+  // a CLOCK_MONOTONIC `now` would make it simulate every tick since time 0.
+  if (!booted_) {
+    emulator_.power_cycle(now);
+    booted_ = true;
+  }
   devices::FingertipCommand c;
   c.sequence = ++sequence_;
   c.mode = devices::FingertipMode::motor_angles;

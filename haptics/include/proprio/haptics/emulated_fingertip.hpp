@@ -46,6 +46,7 @@ class EmulatedFingertip final : public FingertipSink {
   std::shared_ptr<const FingertipDeviceModel> model_;
   devices::FingertipEmulator emulator_;
   std::uint16_t sequence_ = 0;
+  bool booted_ = false;
   FingertipForce measured_;
 };
 

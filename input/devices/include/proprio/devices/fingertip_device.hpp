@@ -187,6 +187,8 @@ class FingertipDevice {
   FingertipCommandStatus command_angles(const std::array<double, kFingertipMaxMotors>& output_angle_rad) noexcept;
   FingertipCommandStatus disable() noexcept;
   // Servo thread (one consumer): the newest feedback; false before the first.
+  // After a disconnect it is the last sample of the old connection until new
+  // ones arrive: check state() or receive_ns before trusting it.
   bool latest_feedback(FingertipFeedbackSample& out) noexcept;
   // The same, but true only when a newer report arrived since the last call.
   bool fresh_feedback(FingertipFeedbackSample& out) noexcept;

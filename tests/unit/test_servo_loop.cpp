@@ -32,6 +32,7 @@ struct Rig {
     EXPECT_TRUE(sim) << sim.error().message;
     TouchScriptOptions to;
     to.p_surface_in_world = Vec3(0, 1.0, -0.55);
+    to.press_depth_m = 0.01;  // deep enough that the press is well above the noise
     script = std::make_unique<TouchScript>(sim->hand_model(), Handedness::right, to);
     Pose T;
     HandAngles a;

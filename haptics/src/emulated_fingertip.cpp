@@ -84,8 +84,13 @@ void EmulatedFingertip::send(const MotorAngles& motors, const FingertipForce&, b
   for (std::size_t i = 0; i < model_->motor_count(); ++i) c.values[i] = to_micro(motors.rad[i]);
   c.host_time_ns = now;
   const auto bytes = devices::encode_fingertip_command(c);
-  emulator_.handle_command(bytes, now);
+  // The device runs up to now on what it had, then this command arrives and
+  // applies at its next control tick, as over USB. The other order would
+  // leave a command that arrives a hair after a tick pending until the next
+  // send supersedes it: with the loop's clock off the device's 1 ms grid by
+  // any amount, no command would ever be applied.
   emulator_.advance_to(now);
+  emulator_.handle_command(bytes, now);
   const auto& truth = emulator_.snapshot().fsr_force_n;
   measured_ = FingertipForce{truth[0], truth[1], truth[2]};
 }

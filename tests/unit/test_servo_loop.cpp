@@ -5,17 +5,19 @@
 #include <chrono>
 #include <thread>
 
+#include "proprio/haptics/emulated_fingertip.hpp"
 #include "proprio/haptics/servo_loop.hpp"
 #include "proprio/haptics/touch_script.hpp"
 
 namespace proprio::haptics {
 namespace {
 
-std::shared_ptr<const FingertipDeviceModel> force_vector_device() {
-  auto m = load_device_model(PROPRIO_SOURCE_DIR "/config/haptics/force_vector.toml");
+std::shared_ptr<const FingertipDeviceModel> shipped_device(const char* name) {
+  auto m = load_device_model(std::string(PROPRIO_SOURCE_DIR "/config/haptics/") + name + ".toml");
   EXPECT_TRUE(m) << m.error().message;
   return std::shared_ptr<const FingertipDeviceModel>(std::move(*m));
 }
+std::shared_ptr<const FingertipDeviceModel> force_vector_device() { return shipped_device("force_vector"); }
 
 struct Rig {
   HandModel model{*HandShape::from_measurements(0.19, 0.09)};
@@ -23,7 +25,8 @@ struct Rig {
   std::shared_ptr<RecordingSink> index_sink = std::make_shared<RecordingSink>();
   std::unique_ptr<TouchScript> script;
 
-  explicit Rig(ServoLoopOptions options = {}) {
+  explicit Rig(ServoLoopOptions options = {}, std::shared_ptr<const FingertipDeviceModel> device = force_vector_device(),
+               std::shared_ptr<FingertipSink> sink = nullptr) {
     // A table whose top is where the script presses.
     HapticScene scene;
     scene.floor_height_m.reset();
@@ -40,8 +43,8 @@ struct Rig {
     sim->reset_hand(T, a);
     ServoChannel c;
     c.finger = Finger::index;
-    c.model = force_vector_device();
-    c.sink = index_sink;
+    c.model = std::move(device);
+    c.sink = sink ? std::move(sink) : index_sink;
     std::vector<ServoChannel> channels;
     channels.push_back(c);
     auto l = ServoLoop::create(std::move(*sim), std::move(channels), options);
@@ -144,6 +147,36 @@ TEST(ServoLoop, ThreadRunsAndStopZeroesTheDevices) {
   EXPECT_FALSE(rig.index_sink->last_enabled());
   EXPECT_EQ(rig.index_sink->measured().normal_n, 0.0);
   EXPECT_EQ(rig.index_sink->measured().shear_magnitude_n(), 0.0);
+}
+
+TEST(ServoLoop, EmulatedPlatformDeviceRendersTheCommandedForceOnItsSensors) {
+  // Closed loop without hardware: the contact force goes through the gate and
+  // the platform model's inverse kinematics to motor targets, over the wire
+  // encoding to the emulated device, whose motors (PD, gearbox, fingertip
+  // stiffness) move the plate; its force sensors read what the plate renders.
+  auto platform = shipped_device("platform_3dof");
+  auto device = EmulatedFingertip::create(platform);
+  ASSERT_TRUE(device) << device.error().message;
+  std::shared_ptr<EmulatedFingertip> sink = std::move(*device);
+  Rig rig({}, platform, sink);
+  rig.loop->engage(kNsPerSecond);
+  rig.run(0.0, 1.9);  // approach, press, hold while the slide begins
+  const ServoSnapshot* snap = rig.loop->latest();
+  ASSERT_NE(snap, nullptr);
+  const FingertipForce commanded = snap->channels[0].commanded;
+  ASSERT_GT(commanded.normal_n, 0.3) << "the press reaches the device";
+  const FingertipForce measured = sink->measured();
+  EXPECT_NEAR(measured.normal_n, commanded.normal_n, 0.1 * commanded.normal_n + 0.05);
+  EXPECT_NEAR(measured.shear_x_n, commanded.shear_x_n, 0.1 * commanded.shear_magnitude_n() + 0.05);
+  EXPECT_NEAR(measured.shear_z_n, commanded.shear_z_n, 0.1 * commanded.shear_magnitude_n() + 0.05);
+  EXPECT_EQ(sink->emulator().stats().faults_latched, 0u) << "no device fault on the way";
+  EXPECT_EQ(sink->emulator().stats().commands_rejected, 0u);
+  EXPECT_GE(sink->emulator().stats().commands_applied, 1800u) << "one command per tick reaches the motors";
+
+  // Stopping disables the device; its motors return to rest.
+  rig.loop->disengage_and_zero(3 * kNsPerSecond);
+  for (int i = 1; i <= 200; ++i) rig.loop->tick(3 * kNsPerSecond + i * kNsPerMillisecond);
+  EXPECT_LT(sink->measured().normal_n, 0.02);
 }
 
 TEST(ServoLoop, RejectsBadChannels) {

@@ -39,27 +39,6 @@ namespace {
 
 using namespace proprio::devices;
 
-std::atomic<bool> g_stop{false};
-extern "C" void on_glove_sigint(int) {
-  g_stop.store(true);
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
-}
-
-// USB IDs are hexadecimal by convention: "1209", "0x1209".
-std::string check_hex_id(const std::string& text) {
-  char* end = nullptr;
-  const unsigned long v = std::strtoul(text.c_str(), &end, 16);
-  if (text.empty() || *end != '\0' || v > 0xFFFF) return "'" + text + "' is not a 16-bit hexadecimal USB ID";
-  return {};
-}
-std::uint16_t parse_hex_id(const std::string& text) {
-  return static_cast<std::uint16_t>(std::strtoul(text.c_str(), nullptr, 16));
-}
-std::string hex4(std::uint16_t v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "%04x", v);
-  return buf;
-}
 
 // ---------------------------------------------------------------------------
 // list
@@ -267,8 +246,8 @@ int monitor_live(const MonitorArgs& a) {
   } else {
     std::printf("monitoring %s (Ctrl-C to stop)\n", sel.describe().c_str());
   }
-  g_stop.store(false);
-  auto previous = std::signal(SIGINT, on_glove_sigint);
+  g_sigint_stop.store(false);
+  auto previous = std::signal(SIGINT, on_sigint_stop);
   if (auto s = device.start(); !s) {
     std::signal(SIGINT, previous);
     return logger().error("{}", s.error().message), 1;
@@ -279,7 +258,7 @@ int monitor_live(const MonitorArgs& a) {
   GloveDeviceStats prev = device.stats();
   auto prev_time = start;
   GloveSample sample;
-  while (!g_stop.load()) {
+  while (!g_sigint_stop.load()) {
     while (device.pop(sample)) last[sample.imu.sensor_id % kGloveMaxImus] = {true, sample.imu.accel_mps2, sample.imu.gyro_radps};
     const auto now = std::chrono::steady_clock::now();
     const double elapsed = std::chrono::duration<double>(now - start).count();

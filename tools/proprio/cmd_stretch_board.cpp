@@ -40,27 +40,6 @@ namespace {
 
 using namespace proprio::devices;
 
-std::atomic<bool> g_stop{false};
-extern "C" void on_stretch_sigint(int) {
-  g_stop.store(true);
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
-}
-
-// USB IDs are hexadecimal by convention: "1209", "0x1209".
-std::string check_hex_id(const std::string& text) {
-  char* end = nullptr;
-  const unsigned long v = std::strtoul(text.c_str(), &end, 16);
-  if (text.empty() || *end != '\0' || v > 0xFFFF) return "'" + text + "' is not a 16-bit hexadecimal USB ID";
-  return {};
-}
-std::uint16_t parse_hex_id(const std::string& text) {
-  return static_cast<std::uint16_t>(std::strtoul(text.c_str(), nullptr, 16));
-}
-std::string hex4(std::uint16_t v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "%04x", v);
-  return buf;
-}
 unsigned long long ull(std::uint64_t v) { return static_cast<unsigned long long>(v); }
 double percent(std::uint64_t part, std::uint64_t whole) {
   return whole == 0 ? 0.0 : 100.0 * static_cast<double>(part) / static_cast<double>(whole);
@@ -348,14 +327,14 @@ void print_device_totals(const StretchDeviceStats& st, double elapsed) {
 // interval; per_sample sees every measurement on this thread.
 template <typename PerSample>
 double watch(StretchDevice& device, double seconds, double interval_s, LatestValues& latest, PerSample&& per_sample) {
-  g_stop.store(false);
-  auto previous = std::signal(SIGINT, on_stretch_sigint);
+  g_sigint_stop.store(false);
+  auto previous = std::signal(SIGINT, on_sigint_stop);
   const auto start = std::chrono::steady_clock::now();
   auto next_print = start + std::chrono::duration<double>(interval_s);
   StretchDeviceStats prev = device.stats();
   auto prev_time = start;
   StretchSample sample;
-  while (!g_stop.load()) {
+  while (!g_sigint_stop.load()) {
     while (device.pop(sample)) {
       latest.add(sample);
       per_sample(sample);

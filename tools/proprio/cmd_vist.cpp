@@ -1,7 +1,10 @@
 // proprio bench vist: the VIST evaluation protocol on simulated subjects.
 // proprio sim-vist: one simulated subject's session, recorded for replay.
-// proprio track vist: the VIST tracker on a recorded session.
+// proprio track vist: the VIST tracker on a recorded session, or live on a
+// glove (USB HID IMU board) and a stereo camera (or a video file).
 #include <algorithm>
+#include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <future>
 #include <nlohmann/json.hpp>
@@ -12,7 +15,11 @@
 #include "commands.hpp"
 #include "progress.hpp"
 #include "proprio/core/log.hpp"
+#include "proprio/devices/glove_device.hpp"
+#include "proprio/devices/glove_protocol.hpp"
+#include "proprio/devices/hid_transport.hpp"
 #include "proprio/sim/subjects.hpp"
+#include "proprio/vist/vist_live.hpp"
 #include "proprio/vist_eval/evaluation.hpp"
 
 namespace proprio::cli {
@@ -238,9 +245,106 @@ struct TrackVistArgs {
   bool force = false;
   double warmup_s = 5.0;
   bool json = false;
+  // --live
+  bool live = false;
+  std::string glove;
+  std::string hand = "right";
+  std::string vid = hex4(devices::kGloveUsbVendorId);
+  std::string pid = hex4(devices::kGloveUsbProductId);
+  std::string imu_serial, imu_path;
+  std::string camera = "/dev/video0";
+  std::string camera_right;
+  std::string calibration;
+  double seconds = 0.0;
+  double interval_s = 1.0;
 };
 
+// The glove and the camera feed the tracker until Ctrl-C or --seconds; a
+// status line each interval says what arrives and where the hand is.
+int run_track_vist_live(const TrackVistArgs& a) {
+  auto glove = a.glove.empty() ? Result<GloveDescription>(GloveDescription::vist_default())
+                               : GloveDescription::load(a.glove);
+  if (!glove) return report_error(glove.error());
+  vist::VistHandSourceOptions so;
+  so.tracker.hand = *parse_handedness(a.hand);  // CLI11 checked the name
+  auto source = vist::VistHandSource::create(*glove, so);
+  if (!source) return report_error(source.error());
+
+  devices::HidDeviceSelector sel;
+  sel.vendor_id = parse_hex_id(a.vid);
+  sel.product_id = parse_hex_id(a.pid);
+  sel.serial = a.imu_serial;
+  sel.path = a.imu_path;
+  auto imu_board = std::make_unique<devices::GloveDevice>(std::make_unique<devices::HidapiTransport>(sel));
+  imu_board->set_state_callback([](devices::GloveLinkState state, std::string_view detail) {
+    std::printf("[glove %s] %.*s\n", devices::to_string(state), static_cast<int>(detail.size()), detail.data());
+    std::fflush(stdout);
+  });
+
+  vist::StereoCameraOptions co;
+  const bool file = std::filesystem::is_regular_file(a.camera);
+  co.input = file ? vist::StereoInput::file : vist::StereoInput::device;
+  co.left = a.camera;
+  co.right = a.camera_right;
+  co.side_by_side = a.camera_right.empty();
+  co.width_px = glove->rig.camera.width_px;
+  co.height_px = glove->rig.camera.height_px;
+  co.fps = glove->rig.rate_hz;
+  co.reader_thread = !file;  // a live camera is drained continuously; a file is paced by VistLiveInput
+  co.calibration_file = a.calibration;
+  if (file) co.file_t0_ns = MonotonicClock::instance().now_ns();
+  auto camera = vist::StereoCamera::open(co);
+  if (!camera) return report_error(camera.error());
+  std::printf("%s\nglove: %s (IMU board %s)\ncamera: %s\n", glove->name.c_str(),
+              glove->origin.empty() ? "built-in thesis glove" : glove->origin.c_str(), sel.describe().c_str(),
+              (*camera)->describe().c_str());
+  if (!file) {
+    std::printf("the camera is taken as fixed (no HMD pose): the head at (0, 1.6, 0) m looking along -Z\n");
+  }
+  auto live = vist::VistLiveInput::create(**source, *glove, std::move(imu_board), std::move(*camera));
+  if (!live) return report_error(live.error());
+
+  g_sigint_stop.store(false);
+  auto previous = std::signal(SIGINT, on_sigint_stop);
+  if (auto s = (*live)->start(); !s) {
+    std::signal(SIGINT, previous);
+    return report_error(s.error());
+  }
+  std::printf(a.seconds > 0 ? "tracking for %g s (Ctrl-C stops early)\n" : "tracking (Ctrl-C to stop)\n", a.seconds);
+  const auto start = std::chrono::steady_clock::now();
+  auto next_print = start + std::chrono::duration<double>(a.interval_s);
+  HandPose pose;
+  while (!g_sigint_stop.load()) {
+    const auto now = std::chrono::steady_clock::now();
+    const double elapsed = std::chrono::duration<double>(now - start).count();
+    if (a.seconds > 0 && elapsed >= a.seconds) break;
+    if (now >= next_print) {
+      const auto st = (*live)->stats();
+      const PoseLookup found = (*source)->lookup(so.tracker.hand, MonotonicClock::instance().now_ns(), pose);
+      std::printf("%7.1fs glove %s, %llu IMU samples; camera %s, %llu frames, %.1f markers/frame; ", elapsed,
+                  devices::to_string(st.glove_state), static_cast<unsigned long long>(st.imu_samples),
+                  vist::to_string(st.camera_state), static_cast<unsigned long long>(st.frames),
+                  st.frames ? static_cast<double>(st.markers_detected) / static_cast<double>(st.frames) : 0.0);
+      if (is_usable(found)) {
+        const Vec3 p = pose.joint(HandJoint::wrist).p;
+        std::printf("wrist at (%.3f, %.3f, %.3f) m\n", p.x(), p.y(), p.z());
+      } else {
+        std::printf("%s\n", found == PoseLookup::empty ? "no hand yet" : "no recent hand pose");
+      }
+      std::fflush(stdout);
+      next_print += std::chrono::duration<double>(a.interval_s);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  std::signal(SIGINT, previous);
+  const auto st = (*live)->stats();
+  (*live)->stop();
+  std::printf("\n%s\n%s\n", st.describe().c_str(), (*source)->stats().describe().c_str());
+  return st.imu_samples > 0 && st.frames > 0 ? 0 : 1;
+}
+
 int run_track_vist(const TrackVistArgs& a) {
+  if (a.live) return run_track_vist_live(a);
   vist_eval::TrackSessionOptions o;
   o.warmup_s = a.warmup_s;
   o.output_path = a.out;
@@ -326,15 +430,49 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
   auto* tv = track->add_subcommand(
       "vist",
       "Replay a recorded VIST session (from 'proprio sim-vist' or a live VIST source) through the tracker,\n"
-      "in the order the data arrived; score it against the session's ground truth when it has one.");
-  tv->add_option("--session", targs->session, "VIST session recording")->required()->check(CLI::ExistingFile);
+      "in the order the data arrived; score it against the session's ground truth when it has one.\n"
+      "With --live: track a real glove (IMU board over USB HID) seen by a stereo camera.");
+  auto* session = tv->add_option("--session", targs->session, "VIST session recording")->check(CLI::ExistingFile);
+  auto* live = tv->add_flag("--live", targs->live,
+                            "track live: the IMU board over USB HID and a stereo camera (or a video file)\n"
+                            "(docs/vist.md, 'With a real glove')");
+  session->excludes(live);
+  live->excludes(session);
+  tv->add_option("--glove", targs->glove, "--live: glove description TOML (default: the thesis glove)")
+      ->check(CLI::ExistingFile);
+  tv->add_option("--hand", targs->hand, "--live: which hand wears the glove")
+      ->check(CLI::IsMember({"left", "right"}))
+      ->capture_default_str();
+  tv->add_option("--vid", targs->vid, "--live: the IMU board's USB vendor ID, hexadecimal")
+      ->check(check_hex_id)
+      ->capture_default_str();
+  tv->add_option("--pid", targs->pid, "--live: the IMU board's USB product ID, hexadecimal")
+      ->check(check_hex_id)
+      ->capture_default_str();
+  tv->add_option("--imu-serial", targs->imu_serial, "--live: open the IMU board with this USB serial number");
+  tv->add_option("--imu-path", targs->imu_path, "--live: open this HID node (e.g. /dev/hidraw3)");
+  tv->add_option("--camera", targs->camera,
+                 "--live: side-by-side stereo camera (/dev/videoN) or video file; the left camera with --camera-right")
+      ->capture_default_str();
+  tv->add_option("--camera-right", targs->camera_right, "--live: the right camera or video, for two separate ones");
+  tv->add_option("--calibration", targs->calibration, "--live: rectify with this 'proprio calibrate stereo' file")
+      ->check(CLI::ExistingFile);
+  tv->add_option("--seconds", targs->seconds, "--live: stop after this long (0: at Ctrl-C)")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  tv->add_option("--interval", targs->interval_s, "--live: seconds between status lines")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
   tv->add_option("--out", targs->out, "write the tracked hand (and the ground truth) to this recording");
   tv->add_flag("--force", targs->force, "overwrite --out if it exists");
   tv->add_option("--warmup", targs->warmup_s, "seconds from the start not scored (acquisition, calibration)")
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
   tv->add_flag("--json", targs->json, "print the result as JSON");
-  tv->callback([targs, &exit_code] { exit_code = run_track_vist(*targs); });
+  tv->callback([targs, &exit_code] {
+    if (!targs->live && targs->session.empty()) throw CLI::RequiredError::Option(1, 1, 0, "--session or --live");
+    exit_code = run_track_vist(*targs);
+  });
 
   auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
   auto args = std::make_shared<BenchVistArgs>();

@@ -36,12 +36,6 @@ constexpr int kExitError = 1;
 constexpr int kExitNoHandTracking = 2;
 constexpr int kExitNeverActive = 3;
 
-std::atomic<bool> g_stop{false};
-extern "C" void on_sigint(int) {
-  g_stop.store(true);
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
-}
-
 struct ProbeArgs {
   double seconds = 5.0;
   std::string space = "view";
@@ -285,7 +279,7 @@ int Probe::create_session() {
   if (!ok(xrCreateSession(instance_, &sci, &session_), "xrCreateSession (headless)")) return kExitError;
 
   if (!wait_for_state(XR_SESSION_STATE_READY, 10.0)) {
-    if (!g_stop.load()) logger().error("the session never became READY (last state {})", session_state_name(state_));
+    if (!g_sigint_stop.load()) logger().error("the session never became READY (last state {})", session_state_name(state_));
     return kExitError;
   }
   auto bi = make<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
@@ -371,7 +365,7 @@ bool Probe::pump_events() {
 bool Probe::wait_for_state(XrSessionState wanted, double timeout_s) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (state_ != wanted) {
-    if (!pump_events() || g_stop.load()) return false;
+    if (!pump_events() || g_sigint_stop.load()) return false;
     if (state_ == wanted) break;
     if (std::chrono::steady_clock::now() > deadline) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -473,7 +467,7 @@ int Probe::run() {
   const auto start = clock::now();
   auto window_start = start, last_wait_return = start;
   std::uint64_t frames = 0;
-  while (!g_stop.load() && !exiting_) {
+  while (!g_sigint_stop.load() && !exiting_) {
     if (!pump_events()) break;
     const double elapsed = std::chrono::duration<double>(clock::now() - start).count();
     if (elapsed >= args_.seconds) break;
@@ -517,7 +511,7 @@ int Probe::run() {
   const double total_s = std::chrono::duration<double>(clock::now() - start).count();
   const double tail_s = std::chrono::duration<double>(clock::now() - window_start).count();
   if (tail_s > 0.2) report_second(total_s, tail_s);
-  if (g_stop.load()) std::printf("\nInterrupted.\n");
+  if (g_sigint_stop.load()) std::printf("\nInterrupted.\n");
 
   std::printf("\nSummary over %.1f s, %llu frames:\n", total_s, static_cast<unsigned long long>(frames));
   bool any_active = false;
@@ -583,8 +577,8 @@ void Probe::teardown() {
 }
 
 int run_xr_probe(const ProbeArgs& a) {
-  g_stop.store(false);
-  auto previous = std::signal(SIGINT, on_sigint);
+  g_sigint_stop.store(false);
+  auto previous = std::signal(SIGINT, on_sigint_stop);
   int rc = kExitError;
   {
     Probe probe(a);

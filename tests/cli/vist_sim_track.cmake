@@ -1,0 +1,43 @@
+# End-to-end check of the VIST CLI: simulate a session, replay it through the
+# tracker and score it; the live mode's argument checks and clear errors.
+# Invoked by ctest with -DPROPRIO=<cli> -DWORK_DIR=<scratch dir>.
+file(REMOVE_RECURSE "${WORK_DIR}")
+file(MAKE_DIRECTORY "${WORK_DIR}")
+
+function(run_ok)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "command failed (${rc}): ${ARGN}\n${out}\n${err}")
+  endif()
+  set(OUT "${out}" PARENT_SCOPE)
+endfunction()
+
+function(expect_failure needle)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(rc EQUAL 0)
+    message(FATAL_ERROR "expected a failure: ${ARGN}\n${out}")
+  endif()
+  string(FIND "${out}${err}" "${needle}" at)
+  if(at EQUAL -1)
+    message(FATAL_ERROR "expected '${needle}' in the error of ${ARGN}:\n${out}\n${err}")
+  endif()
+endfunction()
+
+set(session "${WORK_DIR}/s.prec")
+run_ok(${PROPRIO} sim-vist --subject 2 --seconds 12 --seed 4 --out ${session})
+run_ok(${PROPRIO} track vist --session ${session} --warmup 5 --json --out ${WORK_DIR}/tracked.prec)
+string(JSON scored GET "${OUT}" scored)
+string(JSON mean GET "${OUT}" keypoint_mean_mm)
+string(JSON frames GET "${OUT}" stereo_frames)
+if(NOT scored OR mean GREATER 8.0 OR frames LESS 300)
+  message(FATAL_ERROR "track vist: scored ${scored}, keypoint mean ${mean} mm, ${frames} frames:\n${OUT}")
+endif()
+run_ok(${PROPRIO} replay ${WORK_DIR}/tracked.prec --summary)
+string(FIND "${OUT}" "hand/right/vist" at)
+if(at EQUAL -1)
+  message(FATAL_ERROR "the tracked recording lacks the tracker's stream:\n${OUT}")
+endif()
+
+expect_failure("--session or --live" ${PROPRIO} track vist)
+expect_failure("excludes" ${PROPRIO} track vist --live --session ${session})
+expect_failure("/nonexistent/video7" ${PROPRIO} track vist --live --camera /nonexistent/video7 --seconds 1)

@@ -12,7 +12,12 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include <csignal>
+#include <filesystem>
+
+#include "proprio/core/replay_source.hpp"
 #include "proprio/core/stretch_glove_layout.hpp"
+#include "proprio/glove/dataset_recorder.hpp"
 #include "proprio/glove/calibration.hpp"
 #include "proprio/devices/stretch_device.hpp"
 #include "proprio/glove/readout.hpp"
@@ -228,9 +233,130 @@ int run_calibrate_glove(const CalibrateGloveArgs& a) {
   return 0;
 }
 
+struct RecordGloveArgs {
+  std::string out;
+  std::string truth;
+  std::string truth_stream;
+  std::string layout;
+  std::string hand = "right";
+  int subject = 0, session = 0, donning = -1;
+  double hand_length_m = 0.19, hand_width_m = 0.09;
+  double exploration_s = 60.0;
+  double seconds = 360.0;
+  bool force = false;
+};
+
+// Captures the board's frames, then pairs them with the ground-truth
+// recording (made at the same time, on CLOCK_MONOTONIC) into a dataset.
+int run_record_glove(const RecordGloveArgs& a) {
+  auto layout = load_layout(a.layout);
+  if (!layout) return report_error(layout.error());
+  if (!a.force && std::filesystem::exists(a.out)) {
+    return report_error(Error{Errc::invalid_argument, a.out + " exists; pass --force to replace it"});
+  }
+  auto recorder = glove::DatasetRecorder::create(*layout);
+  if (!recorder) return report_error(recorder.error());
+  devices::StretchDeviceOptions o;
+  o.stream.expected_top_strips = static_cast<std::uint8_t>(layout->top_strips);
+  o.stream.expected_bottom_strips = static_cast<std::uint8_t>(layout->bottom_strips);
+  devices::StretchDevice device(std::make_unique<devices::HidapiTransport>(devices::stretch_board_selector()), o);
+  if (auto st = device.start(); !st) return report_error(st.error());
+
+  std::printf("Recording %.0f s: first %.0f s of exploration (make a fist, spread and close the fingers, bend each "
+              "finger on its own, move the thumb across the palm and out), then the task. Ctrl-C ends early.\n",
+              a.seconds, a.exploration_s);
+  g_sigint_stop.store(false);
+  auto previous = std::signal(SIGINT, on_sigint_stop);
+  const TimeNs start = MonotonicClock::instance().now_ns();
+  const TimeNs exploration_end = start + seconds_to_ns(a.exploration_s);
+  TimeNs next_report = start + 5 * kNsPerSecond;
+  devices::StretchSample m;
+  while (!g_sigint_stop.load() && MonotonicClock::instance().now_ns() < start + seconds_to_ns(a.seconds)) {
+    bool got = false;
+    while (device.pop(m)) {
+      recorder->push(m);
+      got = true;
+    }
+    if (!got) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    if (const TimeNs now = MonotonicClock::instance().now_ns(); now >= next_report) {
+      next_report += 5 * kNsPerSecond;
+      const auto st = device.stats();
+      std::printf("  %4.0f s %-11s board %s, %zu frames (%zu incomplete)\n", 1e-9 * static_cast<double>(now - start),
+                  now < exploration_end ? "exploring" : "task", devices::to_string(st.state), recorder->frames(),
+                  recorder->stats().frames_invalid);
+      std::fflush(stdout);
+    }
+  }
+  device.stop();
+  std::signal(SIGINT, previous);
+  if (recorder->frames() == 0) {
+    return report_error(Error{Errc::unavailable, "no complete frame came from the read-out board; is it plugged in? "
+                                                 "'proprio stretch-board list' and 'monitor' check it"});
+  }
+
+  ReplayOptions ro;
+  ro.stream_name_filter = a.truth_stream;
+  auto truth = ReplayHandSource::open(a.truth, ro);
+  if (!truth) return report_error(truth.error());
+  glove::DatasetSessionInfo info;
+  info.subject = a.subject;
+  info.session = a.session;
+  info.donning = a.donning >= 0 ? a.donning : a.session;
+  info.hand = *parse_handedness(a.hand);
+  info.hand_length_m = a.hand_length_m;
+  info.hand_width_m = a.hand_width_m;
+  info.exploration_end_ns = exploration_end;
+  auto session = recorder->finish(*truth, info);
+  if (!session) return report_error(session.error());
+  auto writer = glove::DatasetWriter::create(a.out, *layout, 60.0, a.force);
+  if (!writer) return report_error(writer.error());
+  if (auto st = writer->add_session(*session); !st) return report_error(st.error());
+  nlohmann::json generator = {{"tool", "proprio record glove"}, {"truth", a.truth}, {"truth_stream", a.truth_stream}};
+  if (auto st = writer->finish(generator.dump()); !st) return report_error(st.error());
+  const auto& st = recorder->stats();
+  std::printf("wrote %s: %zu frames (%zu exploration, %zu task); %zu frames without ground truth dropped, %zu "
+              "incomplete; the truth fits the hand model to %.1f mm\n",
+              a.out.c_str(), st.paired, st.exploration, st.task, st.without_truth, st.frames_invalid,
+              1e3 * st.ik_residual_max_m);
+  return 0;
+}
+
 }  // namespace
 
 void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
+  auto* rec = subcommand_group(app, "record", "Record training data");
+  auto rargs = std::make_shared<RecordGloveArgs>();
+  auto* r = rec->add_subcommand(
+      "glove",
+      "Record a stretch-glove training session: the read-out board's frames (USB HID) paired with a ground-truth\n"
+      "hand recorded at the same time (a .prec from a hand tracker, CLOCK_MONOTONIC timestamps), written as a\n"
+      "dataset for tools/stretch_glove (train.py, finetune.py). The first --exploration-seconds are the session's\n"
+      "min-max calibration phase.");
+  r->add_option("--out", rargs->out, "dataset directory to write")->required();
+  r->add_option("--truth", rargs->truth, "ground-truth hand recording (.prec), made during this recording")
+      ->required()
+      ->check(CLI::ExistingFile);
+  r->add_option("--truth-stream", rargs->truth_stream, "which HandPose stream of --truth (default: the tracker's)");
+  r->add_option("--layout", rargs->layout, "glove layout TOML (default: the thesis-like glove)");
+  r->add_option("--hand", rargs->hand, "which hand wears the glove")
+      ->check(CLI::IsMember({"left", "right"}))
+      ->capture_default_str();
+  r->add_option("--subject", rargs->subject, "subject id in the dataset")->capture_default_str();
+  r->add_option("--session", rargs->session, "session number in the dataset")->capture_default_str();
+  r->add_option("--donning", rargs->donning, "donning number (default: the session number)");
+  r->add_option("--hand-length", rargs->hand_length_m, "wrist crease to middle fingertip, m")
+      ->check(CLI::Range(0.12, 0.26))
+      ->capture_default_str();
+  r->add_option("--hand-width", rargs->hand_width_m, "across the knuckles, m")
+      ->check(CLI::Range(0.06, 0.13))
+      ->capture_default_str();
+  r->add_option("--exploration-seconds", rargs->exploration_s, "calibration exploration at the start")
+      ->check(CLI::Range(5.0, 600.0))
+      ->capture_default_str();
+  r->add_option("--seconds", rargs->seconds, "whole recording")->check(CLI::Range(10.0, 7200.0))->capture_default_str();
+  r->add_flag("--force", rargs->force, "replace --out");
+  r->callback([rargs, &exit_code] { exit_code = run_record_glove(*rargs); });
+
   auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
   auto args = std::make_shared<BenchGloveArgs>();
   auto* g = bench->add_subcommand(

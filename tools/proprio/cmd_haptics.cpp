@@ -79,7 +79,7 @@ struct SimArgs {
   std::string scene = "half-cylinder";
   std::string device = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml";
   double seconds = 8.0;
-  double press_depth_m = 0.003;
+  double press_depth_m = TouchScriptOptions{}.press_depth_m;
   double hand_length_m = 0.19, hand_width_m = 0.09;
   std::string plot, csv;
   bool json = false;

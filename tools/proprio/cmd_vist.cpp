@@ -298,9 +298,7 @@ int run_track_vist_live(const TrackVistArgs& a) {
   std::printf("%s\nglove: %s (IMU board %s)\ncamera: %s\n", glove->name.c_str(),
               glove->origin.empty() ? "built-in thesis glove" : glove->origin.c_str(), sel.describe().c_str(),
               (*camera)->describe().c_str());
-  if (!file) {
-    std::printf("the camera is taken as fixed (no HMD pose): the head at (0, 1.6, 0) m looking along -Z\n");
-  }
+  std::printf("the camera is taken as fixed (no HMD pose): the head at (0, 1.6, 0) m looking along -Z\n");
   auto live = vist::VistLiveInput::create(**source, *glove, std::move(imu_board), std::move(*camera));
   if (!live) return report_error(live.error());
 

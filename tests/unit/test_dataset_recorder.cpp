@@ -76,15 +76,15 @@ Recorded record(double seconds, double truth_from_s) {
 }
 
 TEST(DatasetRecorder, PairsFramesWithTheTruthAndCalibratesFromTheExploration) {
-  Recorded r = record(20.0, 1.0);
-  ASSERT_GT(r.recorder.frames(), 1000u);
+  Recorded r = record(10.0, 1.0);  // short: the ASan build runs it too
+  ASSERT_GT(r.recorder.frames(), 500u);
   DatasetSessionInfo info;
   info.subject = 4;
   info.session = 2;
   info.donning = 2;
   info.hand_length_m = sim::sim_subject(4)->hand_length_m;
   info.hand_width_m = sim::sim_subject(4)->hand_width_m;
-  info.exploration_end_ns = kT0 + 8 * kNsPerSecond;
+  info.exploration_end_ns = kT0 + 5 * kNsPerSecond;
   auto session = r.recorder.finish(r.truth, info);
   ASSERT_TRUE(session) << session.error().message;
   const DatasetRecorderStats& st = r.recorder.stats();
@@ -93,12 +93,12 @@ TEST(DatasetRecorder, PairsFramesWithTheTruthAndCalibratesFromTheExploration) {
 
   // The first second has no truth: those frames are dropped, not guessed
   // (less the first few, which the read-out's first cycle left incomplete).
-  const double rate = static_cast<double>(st.frames) / 20.0;
+  const double rate = static_cast<double>(st.frames) / 10.0;
   EXPECT_NEAR(static_cast<double>(st.without_truth + st.frames_invalid), rate, 0.05 * rate);
   EXPECT_LT(st.frames_invalid, 0.2 * rate);
   EXPECT_EQ(session->frames(), st.paired);
   EXPECT_EQ(st.paired + st.without_truth, r.recorder.frames());
-  EXPECT_NEAR(static_cast<double>(st.exploration), 7.0 * rate, 0.05 * rate * 7.0);
+  EXPECT_NEAR(static_cast<double>(st.exploration), 4.0 * rate, 0.05 * rate * 4.0);
   EXPECT_EQ(session->cells.size(), session->frames() * StretchGloveLayout::thesis_default().cell_count());
   EXPECT_EQ(session->angles.size(), session->frames() * kHandDofCount);
   EXPECT_EQ(session->phase.front(), 0);

@@ -365,46 +365,33 @@ Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, 
     const auto radius = [&](std::size_t k) { return 0.5 * (g.joint_radius_m[k] + g.joint_radius_m[k + 1]); };
     std::string indent = "      ";
     std::size_t bones_open = 0;
-    if (f == Finger::thumb) {
-      // Metacarpal (CMC: abduction then flexion), proximal (MCP), distal (IP).
-      static constexpr const char* kBones[] = {"metacarpal", "proximal", "distal"};
-      for (std::size_t k = 0; k < 3; ++k) {
-        const Pose T_local = k == 0 ? side(Pose{g.q_wrist_metacarpal_rest, g.p_base_in_wrist})
-                                    : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[k - 1])};
-        m.s << indent << "<body name=\"proxy_" << fname << '_' << kBones[k] << '"';
-        m.pose_attrs(T_local);
-        m.s << ">\n";
-        indent += "  ";
-        if (k == 0) {
-          hinge(d + 1, abd_axis, indent);
-          hinge(d + 0, flex_axis, indent);
-        } else {
-          hinge(d + 1 + k, flex_axis, indent);
-        }
-        segment("proxy_" + fname + '_' + kBones[k], g.bone_length_m[k], radius(k), indent);
-        ++bones_open;
+    // The thumb's chain starts at its metacarpal (CMC: abduction then
+    // flexion; then MCP, IP). A finger's metacarpal is inside the palm box,
+    // so its chain starts at the proximal bone (MCP: abduction then flexion;
+    // then PIP, DIP). `first` is the first body's index into bone_length_m.
+    static constexpr const char* kThumbBones[] = {"metacarpal", "proximal", "distal"};
+    static constexpr const char* kFingerBones[] = {"proximal", "intermediate", "distal"};
+    const bool thumb = f == Finger::thumb;
+    const char* const* bones = thumb ? kThumbBones : kFingerBones;
+    const std::size_t first = thumb ? 0 : 1;
+    const Quat q_rest = g.q_wrist_metacarpal_rest;
+    const Pose T_wrist_first{q_rest, thumb ? g.p_base_in_wrist
+                                           : g.p_base_in_wrist + q_rest * Vec3(0, 0, -g.bone_length_m[0])};
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::size_t b = first + k;
+      const Pose T_local = k == 0 ? side(T_wrist_first) : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[b - 1])};
+      m.s << indent << "<body name=\"proxy_" << fname << '_' << bones[k] << '"';
+      m.pose_attrs(T_local);
+      m.s << ">\n";
+      indent += "  ";
+      if (k == 0) {
+        hinge(d + 1, abd_axis, indent);
+        hinge(d + 0, flex_axis, indent);
+      } else {
+        hinge(d + 1 + k, flex_axis, indent);
       }
-    } else {
-      // The metacarpal is inside the palm box; proximal (MCP: abduction then
-      // flexion), intermediate (PIP), distal (DIP).
-      static constexpr const char* kBones[] = {"proximal", "intermediate", "distal"};
-      const Quat q_rest = g.q_wrist_metacarpal_rest;
-      const Pose T_wrist_proximal{q_rest, g.p_base_in_wrist + q_rest * Vec3(0, 0, -g.bone_length_m[0])};
-      for (std::size_t k = 0; k < 3; ++k) {
-        const Pose T_local = k == 0 ? side(T_wrist_proximal) : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[k])};
-        m.s << indent << "<body name=\"proxy_" << fname << '_' << kBones[k] << '"';
-        m.pose_attrs(T_local);
-        m.s << ">\n";
-        indent += "  ";
-        if (k == 0) {
-          hinge(d + 1, abd_axis, indent);
-          hinge(d + 0, flex_axis, indent);
-        } else {
-          hinge(d + 1 + k, flex_axis, indent);
-        }
-        segment("proxy_" + fname + '_' + kBones[k], g.bone_length_m[k + 1], radius(k + 1), indent);
-        ++bones_open;
-      }
+      segment("proxy_" + fname + '_' + bones[k], g.bone_length_m[b], radius(b), indent);
+      ++bones_open;
     }
     while (bones_open-- > 0) {
       indent.resize(indent.size() - 2);

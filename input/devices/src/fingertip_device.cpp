@@ -273,6 +273,7 @@ void FingertipDevice::run() {
       backoff = options_.reconnect_backoff_min_ns;
     }
     send_pending_command();
+    if (!transport_->is_open()) continue;  // the write lost the link
     auto n = transport_->read(buf, options_.poll_interval_ns);
     if (!n) {
       lose_link(n.error().message);
@@ -377,6 +378,11 @@ bool FingertipDevice::write_command(const FingertipCommand& command) {
   if (auto s = transport_->write(encode_fingertip_command(command)); !s) {
     ++stats_.write_failures;
     logger().debug("fingertip device: sending command {} failed: {}", command.sequence, s.error().message);
+    // A transport that closed itself on the failure (the device is gone) is a
+    // lost link like a failed read: counted, reported, reconnected.
+    if (!transport_->is_open() && !stop_requested_.load(std::memory_order_acquire)) {
+      lose_link("sending a command failed: " + s.error().message);
+    }
     return false;
   }
   ++stats_.commands_sent;

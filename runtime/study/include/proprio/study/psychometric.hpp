@@ -1,0 +1,150 @@
+#pragma once
+// Psychometric functions and their maximum-likelihood fit, in the Palamedes
+// parameterisation (Prins & Kingdom) so published numbers can be compared:
+//
+//   psi(x) = gamma + (1 - gamma - lambda) * F(x; alpha, beta)
+//
+// gamma is the guess rate (0.5 for 2AFC), lambda the lapse rate. F is one of
+//   weibull            1 - exp(-(x/alpha)^beta)                 (x > 0)
+//   logistic           1 / (1 + exp(-beta (x - alpha)))
+//   gumbel             1 - exp(-10^(beta (x - alpha)))          (log-Weibull; x in log10 units)
+//   cumulative_normal  Phi(beta (x - alpha))                    (beta = 1 / sd)
+//
+// Goodness of fit and confidence intervals follow Wichmann & Hill (2001):
+// deviance against a Monte Carlo distribution from the fitted model, and a
+// seeded parametric bootstrap with percentile and BCa intervals.
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "proprio/core/result.hpp"
+
+namespace proprio::study {
+
+enum class PsychometricModel { weibull, logistic, gumbel, cumulative_normal };
+
+const char* to_string(PsychometricModel model) noexcept;
+// Accepts "weibull", "logistic", "gumbel" (or "log-weibull"), "normal" (or "cumulative-normal").
+Result<PsychometricModel> parse_psychometric_model(std::string_view name);
+
+struct PsychometricParams {
+  double alpha = 0.0;   // location (the Weibull's scale)
+  double beta = 1.0;    // slope parameter
+  double gamma = 0.5;   // guess rate: performance far below threshold
+  double lambda = 0.0;  // lapse rate: 1 - lambda is performance far above threshold
+};
+
+// The sigmoid F in [0, 1], without guess and lapse rates.
+double sigmoid(PsychometricModel model, double alpha, double beta, double x);
+// dF/dx.
+double sigmoid_derivative(PsychometricModel model, double alpha, double beta, double x);
+// x with F(x) = f, for f in (0, 1).
+double sigmoid_inverse(PsychometricModel model, double alpha, double beta, double f);
+
+// psi(x): probability of a correct (or "yes") response.
+double psi(PsychometricModel model, const PsychometricParams& p, double x);
+// The stimulus at which psi reaches `proportion`; an error when the proportion
+// lies outside (gamma, 1 - lambda), which the function never reaches.
+Result<double> threshold_at(PsychometricModel model, const PsychometricParams& p, double proportion);
+// dpsi/dx at x (multiply by the threshold's scale for a dimensionless slope).
+double slope_at(PsychometricModel model, const PsychometricParams& p, double x);
+
+// One stimulus level: how many of how many trials were correct.
+struct StimulusLevel {
+  double level = 0.0;
+  int correct = 0;
+  int trials = 0;
+};
+
+// Checks levels for a fit: finite, counts within 0 <= correct <= trials, and
+// at least two levels with trials (Weibull additionally needs level > 0).
+Status validate_levels(PsychometricModel model, const std::vector<StimulusLevel>& data);
+
+struct FitOptions {
+  PsychometricModel model = PsychometricModel::weibull;
+  double guess = 0.5;          // gamma, fixed
+  bool lapse_free = false;     // false: lambda fixed at `lapse`
+  double lapse = 0.0;          // the fixed lambda
+  double lapse_max = 0.06;     // free lambda lies in [0, lapse_max]
+};
+
+struct PsychometricFit {
+  PsychometricModel model = PsychometricModel::weibull;
+  PsychometricParams params;
+  // Log-likelihood without the binomial coefficients, as Palamedes reports it.
+  double log_likelihood = 0.0;
+  double deviance = 0.0;  // against the saturated model
+  int evaluations = 0;    // of the likelihood, grid included
+};
+
+// Sum over levels of k log psi + (n - k) log(1 - psi).
+double log_likelihood(PsychometricModel model, const PsychometricParams& p, const std::vector<StimulusLevel>& data);
+// 2 * (logL_saturated - logL_model).
+double deviance(PsychometricModel model, const PsychometricParams& p, const std::vector<StimulusLevel>& data);
+
+// Maximum likelihood: a grid search over (alpha, beta[, lambda]) picks the
+// start, then a Nelder-Mead simplex (restarted until it stops improving)
+// polishes it.
+Result<PsychometricFit> fit_psychometric(const std::vector<StimulusLevel>& data, const FitOptions& options);
+// The same, polishing from a given start without the grid (bootstrap refits).
+Result<PsychometricFit> fit_psychometric_from(const std::vector<StimulusLevel>& data, const FitOptions& options,
+                                              const PsychometricParams& start);
+
+struct GoodnessOfFit {
+  double deviance = 0.0;
+  // Fraction of data sets simulated from the fit whose (refitted) deviance is
+  // at least the observed one; small values say the model does not fit.
+  double p_value = 1.0;
+  int simulations = 0;
+};
+Result<GoodnessOfFit> goodness_of_fit(const std::vector<StimulusLevel>& data, const FitOptions& options,
+                                      const PsychometricFit& fit, int simulations, std::uint64_t seed);
+
+struct ConfidenceInterval {
+  double lower = 0.0;
+  double upper = 0.0;
+};
+
+struct BootstrapOptions {
+  int samples = 1999;
+  std::uint64_t seed = 1;
+  double coverage = 0.95;         // two-sided
+  double threshold_proportion = 0.75;
+  bool bca = true;                // BCa needs 2 refits per level for the jackknife
+};
+
+struct BootstrapEstimate {
+  double estimate = 0.0;          // from the fit to the data
+  double standard_error = 0.0;    // SD of the bootstrap distribution
+  ConfidenceInterval percentile;
+  ConfidenceInterval bca;         // NaN bounds when BCa is off or undefined
+};
+
+struct BootstrapResult {
+  int samples = 0;
+  int failed_fits = 0;            // simulated sets whose threshold did not exist
+  double coverage = 0.95;
+  double threshold_proportion = 0.75;
+  BootstrapEstimate alpha, beta, lambda, threshold, slope;
+};
+
+// Parametric bootstrap: simulate binomial data from the fit at the observed
+// levels and trial counts, refit, and read intervals off the distribution.
+Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>& data, const FitOptions& options,
+                                               const PsychometricFit& fit, const BootstrapOptions& bootstrap);
+
+// The stimulus where the observed proportion correct first reaches
+// `proportion`, interpolated linearly between the two neighbouring levels
+// (levels sorted, equal levels pooled). The thesis uses it where the Weibull's
+// shape does not fit the data. An error when the data never cross it.
+Result<double> interpolated_threshold(const std::vector<StimulusLevel>& data, double proportion);
+
+// Pools equal levels and sorts by level.
+std::vector<StimulusLevel> pool_levels(std::vector<StimulusLevel> data);
+
+// Quantile with linear interpolation between order statistics (R type 7,
+// numpy's default); `sorted` must be sorted ascending and non-empty.
+double quantile_sorted(const std::vector<double>& sorted, double q);
+
+}  // namespace proprio::study

@@ -74,6 +74,10 @@ void add_stretch_board_command(CLI::App& app, int& exit_code);
 void add_haptics_commands(CLI::App& app, int& exit_code);
 void add_haptics_device_commands(CLI::App& haptics, int& exit_code);
 void add_layer_commands(CLI::App& app, int& exit_code);
+// `psychometric fit`, `stats ...` and `study ...` (proprio::study).
+void add_study_commands(CLI::App& app, int& exit_code);
+// `run SCENE`: the engine (proprio::engine).
+void add_run_command(CLI::App& app, int& exit_code);
 void add_xr_probe_command(CLI::App& app, int& exit_code);
 
 }  // namespace proprio::cli

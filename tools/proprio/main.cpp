@@ -24,6 +24,12 @@ int main(int argc, char** argv) {
   proprio::cli::add_sim_glove_command(app, exit_code);
   proprio::cli::add_stretch_board_command(app, exit_code);
   proprio::cli::add_haptics_commands(app, exit_code);
+#ifdef PROPRIO_HAVE_STUDY
+  proprio::cli::add_study_commands(app, exit_code);
+#endif
+#ifdef PROPRIO_HAVE_ENGINE
+  proprio::cli::add_run_command(app, exit_code);
+#endif
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
   proprio::cli::add_layer_commands(app, exit_code);
   proprio::cli::add_xr_probe_command(app, exit_code);

@@ -1,0 +1,104 @@
+#pragma once
+// The app runtime: a scene, a hand source, the haptics servo loop and the
+// renderer wired into one frame loop, with three outputs:
+//   xr        an OpenXR session (stereo to an HMD; hands from the runtime's
+//             XR_EXT_hand_tracking, e.g. Proprio's layer, or in-process),
+//   window    a desktop window with a mouse/keyboard camera,
+//   headless  N frames to PNG files from a fixed or orbiting camera.
+// `automatic` tries them in that order.
+//
+// Time: headless runs can step simulated time (a ManualClock the hand source
+// also reads), so they are deterministic and faster than real time; the
+// haptics loop is then ticked 1000 times per simulated second from the frame
+// loop. Otherwise the servo loop runs on its own 1 kHz thread.
+//
+// Shutdown always disengages the haptic gates and sends zero force, also on
+// errors and Ctrl-C (request_stop()).
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "proprio/core/hand_source.hpp"
+#include "proprio/core/hand_model.hpp"
+#include "proprio/core/time.hpp"
+#include "proprio/engine/scene.hpp"
+#include "proprio/haptics/servo_loop.hpp"
+
+namespace proprio::engine {
+
+enum class OutputMode { automatic, xr, window, headless };
+std::string_view to_string(OutputMode mode) noexcept;
+
+enum class HeadlessCamera {
+  head,   // a standing viewer's eyes, looking at the scene's focus
+  orbit,  // circling the focus once over the run
+};
+
+struct AppOptions {
+  OutputMode output = OutputMode::automatic;
+  std::uint32_t width = 1280;  // per eye (headless, window); XR uses the runtime's recommended size
+  std::uint32_t height = 720;
+  bool stereo = true;          // headless: two eyes, written side by side
+  double ipd_m = 0.063;
+  int frames = 90;             // headless; 0 = until stopped (window, XR)
+  double frame_rate_hz = 30.0; // headless
+  std::filesystem::path out_dir;  // headless PNGs (frame_0000.png, ...); empty: render without writing
+  HeadlessCamera camera = HeadlessCamera::head;
+  bool software_renderer = false;  // force lavapipe
+  bool validation = false;         // Vulkan validation layer
+  Handedness hand = Handedness::right;  // the hand that drives the haptic proxy
+  bool show_tracked_hand = true;   // the tracked hand as a translucent ghost when a proxy is shown
+  bool hud = true;
+  std::string describe() const;
+  Status validate() const;
+};
+
+// What the caller wires in. Everything is optional except a scene.
+struct AppInputs {
+  std::shared_ptr<HandSource> hands;
+  // Haptic devices, one per finger; empty: no haptics (the hand is drawn as tracked).
+  std::vector<haptics::ServoChannel> haptic_channels;
+  haptics::ServoLoopOptions servo_options;
+  std::shared_ptr<const HandModel> hand_model;  // for the proxy hand; a default adult hand when null
+  // Headless, deterministic: the clock the hand source reads; the app
+  // advances it each frame. Null: real time.
+  std::shared_ptr<ManualClock> simulated_clock;
+  // Called each frame before hands are read, with the frame's time (a
+  // source without its own thread produces its sample here).
+  std::function<void(TimeNs)> before_frame;
+};
+
+struct AppReport {
+  OutputMode output = OutputMode::headless;
+  std::string device;  // the Vulkan device
+  int frames = 0;
+  std::vector<std::filesystem::path> images;
+  double render_ms_mean = 0, render_ms_p95 = 0, render_ms_max = 0;  // CPU wall time of render + read-back
+  double peak_fingertip_force_n = 0;  // after the safety gate, any channel
+  haptics::ServoTiming servo;
+  bool haptics = false;
+  std::string describe() const;
+};
+
+class App {
+ public:
+  static Result<std::unique_ptr<App>> create(Scene scene, AppInputs inputs, AppOptions options);
+  ~App();
+  App(const App&) = delete;
+  App& operator=(const App&) = delete;
+
+  Result<AppReport> run();
+  // From any thread or a signal handler: the loop ends after the current frame.
+  void request_stop() noexcept { stop_.store(true); }
+
+ private:
+  struct Impl;
+  explicit App(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+  std::atomic<bool> stop_{false};
+};
+
+}  // namespace proprio::engine

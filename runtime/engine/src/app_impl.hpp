@@ -1,0 +1,46 @@
+#pragma once
+// App internals shared by the frame loops (app.cpp: headless and window;
+// xr_session.cpp: OpenXR).
+#include <atomic>
+#include <string>
+#include <vector>
+
+#include "proprio/engine/app.hpp"
+#include "proprio/render/renderer.hpp"
+#include "scene_drawer.hpp"
+
+namespace proprio::engine {
+
+struct App::Impl {
+  Scene scene;
+  AppInputs inputs;
+  AppOptions options;
+  std::atomic<bool>* stop = nullptr;
+  std::shared_ptr<const HandModel> hand_model;
+  std::unique_ptr<haptics::ServoLoop> servo;
+  std::vector<Pose> entity_poses;
+  HandPose tracked;
+  HandPose proxy;
+  std::string hud_status;
+  double peak_force_n = 0;
+  std::vector<double> render_ms;
+
+  Status build_servo();
+  void read_hands(TimeNs t);
+  void step_haptics_to(TimeNs from, TimeNs to);
+  void read_servo_snapshot();
+  void compose(render::DrawList& draws, const SceneDrawer& drawer, double t_s);
+  Pose head_pose(int frame) const;
+  Result<AppReport> run_headless();
+  Result<AppReport> run_window();
+  Result<AppReport> run_xr();
+  AppReport report(OutputMode mode, const std::string& device, int frames) const;
+  void shutdown_haptics();
+};
+
+
+// True when an OpenXR loader finds a runtime (XR_RUNTIME_JSON or the system's
+// active_runtime.json), without creating a session.
+bool xr_runtime_available();
+
+}  // namespace proprio::engine

@@ -1,0 +1,68 @@
+#include "scene_drawer.hpp"
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "proprio/core/glm_interop.hpp"
+
+namespace proprio::engine {
+namespace {
+
+using haptics::ShapeKind;
+
+render::MeshData mesh_for(const Entity& e) {
+  const auto& b = e.body;
+  const auto r = static_cast<float>(b.radius_m);
+  const auto hl = static_cast<float>(b.half_length_m);
+  switch (b.shape) {
+    case ShapeKind::box: return render::primitives::box(to_glm(b.half_extents_m));
+    case ShapeKind::sphere: return render::primitives::sphere(r);
+    case ShapeKind::cylinder: return e.peg_visual ? render::primitives::peg(r, hl) : render::primitives::cylinder(r, hl);
+    case ShapeKind::half_cylinder: return render::primitives::half_cylinder(r, hl, 64);
+    case ShapeKind::capsule: return render::primitives::capsule(r, hl);
+    case ShapeKind::plate_with_hole:
+      return render::primitives::plate_with_hole(static_cast<float>(b.hole_radius_m), to_glm(b.half_extents_m));
+  }
+  return render::primitives::box(glm::vec3(0.01f));
+}
+
+}  // namespace
+
+Result<SceneDrawer> SceneDrawer::create(render::Renderer& renderer, const Scene& scene) {
+  SceneDrawer d;
+  auto unit = render::UnitMeshes::upload(renderer);
+  if (!unit) return unit.error();
+  d.unit_ = *unit;
+  d.floor_height_m_ = scene.floor_height_m;
+  for (const Entity& e : scene.entities) {
+    Result<render::MeshData> mesh = e.gltf ? render::load_gltf(*e.gltf) : Result<render::MeshData>(mesh_for(e));
+    if (!mesh) return mesh.error().with_context("scene object '" + e.body.name + "'");
+    auto id = renderer.upload(*mesh);
+    if (!id) return id.error().with_context("scene object '" + e.body.name + "'");
+    d.meshes_.push_back(*id);
+    d.colors_.emplace_back(e.body.rgba[0], e.body.rgba[1], e.body.rgba[2], e.body.rgba[3]);
+  }
+  return d;
+}
+
+void SceneDrawer::append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity) const {
+  if (floor_height_m_) {
+    const glm::mat4 floor = glm::scale(
+        glm::translate(glm::mat4(1.0f), glm::vec3(0.0f, static_cast<float>(*floor_height_m_) - 0.005f, -0.5f)),
+        glm::vec3(6.0f, 0.01f, 6.0f));
+    draws.items.push_back({unit_.box, floor, {0.32f, 0.34f, 0.36f, 1.0f}});
+  }
+  for (std::size_t i = 0; i < meshes_.size() && i < T_world_entity.size(); ++i) {
+    draws.items.push_back({meshes_[i], to_glm(T_world_entity[i]), colors_[i]});
+  }
+}
+
+void SceneDrawer::append_hand(render::DrawList& draws, const HandPose& pose, bool ghost) const {
+  render::HandStyle style = render::HandStyle::for_hand(pose.hand);
+  if (ghost) {
+    style.joint_color.a = style.bone_color.a = style.untracked_color.a = 0.3f;
+    style.axes = false;
+  }
+  render::append_hand(draws, pose, unit_, style);
+}
+
+}  // namespace proprio::engine

@@ -1,0 +1,27 @@
+#pragma once
+// Uploads a scene's meshes once and appends its entities, the floor and the
+// hands to a draw list each frame.
+#include <vector>
+
+#include "proprio/engine/scene.hpp"
+#include "proprio/render/hand_drawing.hpp"
+#include "proprio/render/renderer.hpp"
+
+namespace proprio::engine {
+
+class SceneDrawer {
+ public:
+  static Result<SceneDrawer> create(render::Renderer& renderer, const Scene& scene);
+
+  // Entity i at `T_world_entity[i]` (the simulation moves free bodies).
+  void append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity) const;
+  void append_hand(render::DrawList& draws, const HandPose& pose, bool ghost) const;
+
+ private:
+  std::vector<render::MeshId> meshes_;
+  std::vector<glm::vec4> colors_;
+  render::UnitMeshes unit_;
+  std::optional<double> floor_height_m_;
+};
+
+}  // namespace proprio::engine

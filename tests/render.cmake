@@ -14,3 +14,28 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::render)
     PROPRIO_GOLDEN_DIR="${CMAKE_CURRENT_SOURCE_DIR}/data/golden"
     PROPRIO_GOLDEN_OUT_DIR="${CMAKE_CURRENT_BINARY_DIR}/golden_out")
 endif()
+
+if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine)
+  proprio_add_test(engine_scene_tests
+    SOURCES unit/test_engine_scene.cpp
+    DEPS proprio::engine)
+
+  proprio_add_test(engine_tests
+    LABEL render
+    SOURCES render/test_engine_headless.cpp
+    DEPS proprio::engine)
+  target_include_directories(engine_tests PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/render)
+  target_compile_definitions(engine_tests PRIVATE
+    PROPRIO_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+    PROPRIO_GOLDEN_DIR="${CMAKE_CURRENT_SOURCE_DIR}/data/golden"
+    PROPRIO_GOLDEN_OUT_DIR="${CMAKE_CURRENT_BINARY_DIR}/golden_out")
+endif()
+
+if(PROPRIO_BUILD_TESTS AND PROPRIO_BUILD_TOOLS AND TARGET proprio::engine)
+  add_test(NAME cli.run_engine
+    COMMAND ${CMAKE_COMMAND}
+      -DPROPRIO=$<TARGET_FILE:proprio>
+      -DWORK_DIR=${CMAKE_CURRENT_BINARY_DIR}/cli_run_work
+      -P ${CMAKE_CURRENT_SOURCE_DIR}/cli/run_engine.cmake)
+  set_tests_properties(cli.run_engine PROPERTIES LABELS "integration;render" TIMEOUT 300)
+endif()

@@ -391,7 +391,9 @@ void FingertipEmulator::boot(TimeNs t_ns) noexcept {
 }
 
 void FingertipEmulator::power_cycle(TimeNs t_ns) {
-  advance_to(t_ns);
+  // A device that has not run yet has nothing to finish; running it up to a
+  // CLOCK_MONOTONIC t would simulate every tick since time 0 (hours).
+  if (next_tick_ > 0) advance_to(t_ns);
   boot(std::max(t_ns, now_ns_));
 }
 

@@ -96,11 +96,14 @@ void App::Impl::read_hands(TimeNs t) {
 
 void App::Impl::step_haptics_to(TimeNs from, TimeNs to) {
   if (!servo) return;
-  for (TimeNs t = from + kNsPerMillisecond; t <= to; t += kNsPerMillisecond) {
-    if (inputs.hands && is_usable(inputs.hands->lookup(options.hand, t, tracked))) {
+  // On a fixed 1 ms grid from the first frame, so frames that are not a
+  // whole number of milliseconds long do not drop ticks.
+  if (next_tick_ns == 0) next_tick_ns = from + kNsPerMillisecond;
+  for (; next_tick_ns <= to; next_tick_ns += kNsPerMillisecond) {
+    if (inputs.hands && is_usable(inputs.hands->lookup(options.hand, next_tick_ns, tracked))) {
       servo->submit_tracked_hand(tracked);
     }
-    servo->tick(t);
+    servo->tick(next_tick_ns);
   }
   // Free bodies move; read them while no thread owns the simulation.
   for (std::size_t i = 0; i < scene.entities.size(); ++i) {

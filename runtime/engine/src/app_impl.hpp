@@ -24,6 +24,7 @@ struct App::Impl {
   std::string hud_status;
   double peak_force_n = 0;
   std::vector<double> render_ms;
+  TimeNs next_tick_ns = 0;  // simulated time: the servo's next tick
 
   Status build_servo();
   void read_hands(TimeNs t);

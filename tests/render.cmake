@@ -39,3 +39,8 @@ if(PROPRIO_BUILD_TESTS AND PROPRIO_BUILD_TOOLS AND TARGET proprio::engine)
       -P ${CMAKE_CURRENT_SOURCE_DIR}/cli/run_engine.cmake)
   set_tests_properties(cli.run_engine PROPERTIES LABELS "integration;render" TIMEOUT 300)
 endif()
+
+if(PROPRIO_BUILD_TESTS AND PROPRIO_BUILD_BENCHMARKS AND TARGET proprio_bench AND TARGET proprio::render)
+  target_sources(proprio_bench PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/bench/bench_render.cpp)
+  target_link_libraries(proprio_bench PRIVATE proprio::render)
+endif()

@@ -1,33 +1,51 @@
 // Proprio mock OpenXR runtime: a test fixture loaded by the real OpenXR loader
 // (through XR_RUNTIME_JSON) so that the Proprio API layer, and Debian's
 // core_validation layer above it, run against a runtime whose every answer a
-// test can predict (see mock_motion.hpp). It is headless only (XR_MND_headless).
+// test can predict (see mock_motion.hpp). Sessions are headless
+// (XR_MND_headless) or render through XR_KHR_vulkan_enable2 into swapchains
+// whose images it can capture to PNG (see README.md).
 //
 // Its checks are real where a layer could get something wrong: handles are
 // tracked per type and owner, structure types and output pointers are
 // validated, and the session lifecycle and frame calls follow the spec's
 // order. Every entry point runs behind `guarded`, so no exception crosses the
 // C ABI, and behind one registry mutex, so any thread may call anything.
+//
+// Vulkan: the runtime never links the Vulkan loader (VK_NO_PROTOTYPES). Every
+// Vulkan function is resolved through the vkGetInstanceProcAddr the app passed
+// to xrCreateVulkanInstanceKHR, so the app's layers (validation) see the
+// runtime's Vulkan calls too.
 #include "mock_motion.hpp"
 
 #include <proprio/openxr_layer/loader_interfaces.hpp>
 
-#include <openxr/openxr_platform.h>  // XR_KHR_convert_timespec_time (XR_USE_TIMESPEC)
+// VK_NO_PROTOTYPES, XR_USE_GRAPHICS_API_VULKAN and XR_USE_TIMESPEC come from CMake.
+#include <vulkan/vulkan.h>
+// Vulkan must come first: the XR_KHR_vulkan_enable2 structures use its types.
+#include <openxr/openxr_platform.h>
 #include <openxr/openxr_reflection.h>
+
+#include <stb_image_write.h>
 
 #include <time.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <climits>
 #include <cmath>
+#include <cstdarg>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
+#include <filesystem>
 #include <initializer_list>
+#include <memory>
 #include <mutex>
 #include <new>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -42,9 +60,65 @@ constexpr char kSystemName[] = "Proprio mock HMD (headless)";
 constexpr XrSystemId kSystemId = 1;
 constexpr uint32_t kMaxLayerCount = 16;
 
+// PRIMARY_STEREO: two views, eyes 63 mm apart, a fixed symmetric field of view.
+constexpr uint32_t kViewCount = 2;
+constexpr uint32_t kDefaultViewWidth = 640;
+constexpr uint32_t kDefaultViewHeight = 360;
+constexpr uint32_t kMaxImageSize = 4096;
+constexpr float kHalfIpdM = 0.0315f;
+constexpr XrFovf kFov{-0.785f, 0.785f, 0.6f, -0.6f};  // left, right, up, down (radians)
+
+// Swapchains: images per swapchain, and what a fresh image holds (opaque magenta,
+// so a frame the app never drew is obvious in a capture).
+constexpr uint32_t kSwapchainImageCount = 3;
+constexpr VkClearColorValue kFreshImageColour{{1.0f, 0.0f, 1.0f, 1.0f}};
+constexpr int64_t kSwapchainFormats[] = {VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_B8G8R8A8_SRGB};
+constexpr uint32_t kDefaultCaptureFrames = 2;
+
 bool env_is_one(const char* name) {
   const char* value = std::getenv(name);
   return value != nullptr && std::string_view(value) == "1";
+}
+
+void warn(const char* format, ...) __attribute__((format(printf, 1, 2)));
+void warn(const char* format, ...) {
+  va_list args;
+  va_start(args, format);
+  std::fputs("[proprio-mock-xr] ", stderr);
+  std::vfprintf(stderr, format, args);
+  std::fputc('\n', stderr);
+  va_end(args);
+}
+
+// A non-negative decimal integer from the environment; nullopt when unset or
+// empty, `fallback` (with a warning) when malformed.
+std::optional<uint32_t> env_uint(const char* name, uint32_t fallback) {
+  const char* value = std::getenv(name);
+  if (value == nullptr || value[0] == '\0') return std::nullopt;
+  char* end = nullptr;
+  errno = 0;
+  const unsigned long n = std::strtoul(value, &end, 10);
+  if (errno != 0 || *end != '\0' || value[0] == '-' || n > UINT32_MAX) {
+    warn("%s=%s is not a non-negative integer; using %u", name, value, fallback);
+    return fallback;
+  }
+  return static_cast<uint32_t>(n);
+}
+
+// PROPRIO_MOCK_RUNTIME_VIEW_SIZE=WxH (each 1..4096); else 640x360.
+XrExtent2Di view_size() {
+  const char* value = std::getenv("PROPRIO_MOCK_RUNTIME_VIEW_SIZE");
+  XrExtent2Di size{static_cast<int32_t>(kDefaultViewWidth), static_cast<int32_t>(kDefaultViewHeight)};
+  if (value == nullptr || value[0] == '\0') return size;
+  unsigned w = 0, h = 0;
+  char tail = 0;
+  if (std::sscanf(value, "%ux%u%c", &w, &h, &tail) == 2 && w >= 1 && h >= 1 && w <= kMaxImageSize &&
+      h <= kMaxImageSize) {
+    return {static_cast<int32_t>(w), static_cast<int32_t>(h)};
+  }
+  warn("PROPRIO_MOCK_RUNTIME_VIEW_SIZE=%s is not WxH with 1 <= W, H <= %u; using %dx%d", value, kMaxImageSize,
+       size.width, size.height);
+  return size;
 }
 
 // ---------------------------------------------------------------- strings --
@@ -76,6 +150,16 @@ void copy_string(char* dst, std::size_t capacity, std::string_view src) {
   dst[n] = '\0';
 }
 
+// A Vulkan call the runtime made failed: guarded() reports it and answers
+// XR_ERROR_RUNTIME_FAILURE.
+struct VulkanError : std::runtime_error {
+  VulkanError(const char* what, VkResult r) : std::runtime_error(what), result(r) {}
+  VkResult result;
+};
+void check(VkResult result, const char* what) {
+  if (result != VK_SUCCESS) throw VulkanError(what, result);
+}
+
 // ------------------------------------------------------- guarded entries --
 bool log_calls() {
   static const bool enabled = env_is_one("PROPRIO_MOCK_RUNTIME_LOG");
@@ -88,6 +172,9 @@ XrResult guarded(const char* function, Body&& body, const char* what = nullptr) 
   XrResult result = XR_ERROR_RUNTIME_FAILURE;
   try {
     result = body();
+  } catch (const VulkanError& e) {
+    warn("%s: %s failed with VkResult %d", function, e.what(), static_cast<int>(e.result));
+    result = XR_ERROR_RUNTIME_FAILURE;
   } catch (const std::bad_alloc&) {
     result = XR_ERROR_OUT_OF_MEMORY;
   } catch (...) {
@@ -135,7 +222,7 @@ struct Entry<Name, Impl> {
 };
 
 // ---------------------------------------------------------------- state --
-enum class Ext { none, convert_timespec_time, headless, hand_tracking };
+enum class Ext { none, convert_timespec_time, headless, hand_tracking, vulkan_enable2 };
 
 struct ExtensionInfo {
   const char* name;
@@ -150,6 +237,7 @@ std::vector<ExtensionInfo> offered_extensions() {
       {XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME, XR_KHR_convert_timespec_time_SPEC_VERSION,
        Ext::convert_timespec_time},
       {XR_MND_HEADLESS_EXTENSION_NAME, XR_MND_headless_SPEC_VERSION, Ext::headless},
+      {XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME, XR_KHR_vulkan_enable2_SPEC_VERSION, Ext::vulkan_enable2},
   };
   if (env_is_one("PROPRIO_MOCK_RUNTIME_HAND_TRACKING")) {
     list.push_back({XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_EXT_hand_tracking_SPEC_VERSION, Ext::hand_tracking});
@@ -157,12 +245,114 @@ std::vector<ExtensionInfo> offered_extensions() {
   return list;
 }
 
+// ---- Vulkan, resolved through the app's vkGetInstanceProcAddr ----
+#define PROPRIO_MOCK_VK_INSTANCE_FUNCTIONS(X) \
+  X(vkEnumeratePhysicalDevices)               \
+  X(vkGetPhysicalDeviceProperties)            \
+  X(vkGetPhysicalDeviceQueueFamilyProperties) \
+  X(vkGetPhysicalDeviceMemoryProperties)      \
+  X(vkGetPhysicalDeviceImageFormatProperties) \
+  X(vkCreateDevice)                           \
+  X(vkGetDeviceProcAddr)
+
+#define PROPRIO_MOCK_VK_DEVICE_FUNCTIONS(X) \
+  X(vkGetDeviceQueue)                       \
+  X(vkDeviceWaitIdle)                       \
+  X(vkCreateImage)                          \
+  X(vkDestroyImage)                         \
+  X(vkGetImageMemoryRequirements)           \
+  X(vkBindImageMemory)                      \
+  X(vkCreateBuffer)                         \
+  X(vkDestroyBuffer)                        \
+  X(vkGetBufferMemoryRequirements)          \
+  X(vkBindBufferMemory)                     \
+  X(vkAllocateMemory)                       \
+  X(vkFreeMemory)                           \
+  X(vkMapMemory)                            \
+  X(vkUnmapMemory)                          \
+  X(vkCreateCommandPool)                    \
+  X(vkDestroyCommandPool)                   \
+  X(vkAllocateCommandBuffers)               \
+  X(vkResetCommandBuffer)                   \
+  X(vkBeginCommandBuffer)                   \
+  X(vkEndCommandBuffer)                     \
+  X(vkCmdPipelineBarrier)                   \
+  X(vkCmdClearColorImage)                   \
+  X(vkCmdCopyImageToBuffer)                 \
+  X(vkCreateFence)                          \
+  X(vkDestroyFence)                         \
+  X(vkResetFences)                          \
+  X(vkWaitForFences)                        \
+  X(vkQueueSubmit)
+
+#define PROPRIO_MOCK_VK_MEMBER(name) PFN_##name name = nullptr;
+struct VkInstanceFunctions {
+  PROPRIO_MOCK_VK_INSTANCE_FUNCTIONS(PROPRIO_MOCK_VK_MEMBER)
+};
+struct VkDeviceFunctions {
+  PROPRIO_MOCK_VK_DEVICE_FUNCTIONS(PROPRIO_MOCK_VK_MEMBER)
+};
+#undef PROPRIO_MOCK_VK_MEMBER
+
+// Each returns the name of the first function it could not resolve, or nullptr.
+const char* load(VkInstanceFunctions& f, PFN_vkGetInstanceProcAddr gipa, VkInstance instance) {
+#define PROPRIO_MOCK_VK_LOAD(name)                                      \
+  f.name = reinterpret_cast<PFN_##name>(gipa(instance, #name));         \
+  if (f.name == nullptr) return #name;
+  PROPRIO_MOCK_VK_INSTANCE_FUNCTIONS(PROPRIO_MOCK_VK_LOAD)
+#undef PROPRIO_MOCK_VK_LOAD
+  return nullptr;
+}
+const char* load(VkDeviceFunctions& f, PFN_vkGetDeviceProcAddr gdpa, VkDevice device) {
+#define PROPRIO_MOCK_VK_LOAD(name)                                      \
+  f.name = reinterpret_cast<PFN_##name>(gdpa(device, #name));           \
+  if (f.name == nullptr) return #name;
+  PROPRIO_MOCK_VK_DEVICE_FUNCTIONS(PROPRIO_MOCK_VK_LOAD)
+#undef PROPRIO_MOCK_VK_LOAD
+  return nullptr;
+}
+
+// What xrCreateVulkanInstanceKHR / xrCreateVulkanDeviceKHR made for the app.
+// The app owns (and destroys) them; the runtime only checks a graphics binding
+// against them. Looked up newest first, as a destroyed handle's value can return.
+struct VulkanInstanceRecord {
+  VkInstance instance = VK_NULL_HANDLE;
+  PFN_vkGetInstanceProcAddr get_instance_proc_addr = nullptr;
+};
+struct VulkanDeviceRecord {
+  VkDevice device = VK_NULL_HANDLE;
+  VkInstance instance = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_device = VK_NULL_HANDLE;
+  std::vector<std::pair<uint32_t, uint32_t>> queues;  // (family, count) from VkDeviceCreateInfo
+};
+
 struct InstanceState {
   bool convert_timespec_time = false;
   bool headless = false;
   bool hand_tracking = false;
+  bool vulkan_enable2 = false;
   std::deque<XrEventDataSessionStateChanged> events;
   std::vector<std::string> paths;  // XrPath p names paths[p - 1]
+
+  // XR_KHR_vulkan_enable2
+  bool vulkan_requirements_queried = false;
+  std::vector<VulkanInstanceRecord> vulkan_instances;
+  VkInstance graphics_device_instance = VK_NULL_HANDLE;  // the last xrGetVulkanGraphicsDevice2KHR answer
+  VkPhysicalDevice graphics_device = VK_NULL_HANDLE;
+  std::vector<VulkanDeviceRecord> vulkan_devices;
+
+  const VulkanInstanceRecord* vulkan_instance(VkInstance instance) const {
+    for (auto it = vulkan_instances.rbegin(); it != vulkan_instances.rend(); ++it) {
+      if (it->instance == instance) return &*it;
+    }
+    return nullptr;
+  }
+  const VulkanDeviceRecord* vulkan_device(VkDevice device) const {
+    for (auto it = vulkan_devices.rbegin(); it != vulkan_devices.rend(); ++it) {
+      if (it->device == device) return &*it;
+    }
+    return nullptr;
+  }
 
   bool enabled(Ext ext) const {
     switch (ext) {
@@ -174,9 +364,33 @@ struct InstanceState {
         return headless;
       case Ext::hand_tracking:
         return hand_tracking;
+      case Ext::vulkan_enable2:
+        return vulkan_enable2;
     }
     return false;
   }
+};
+
+// A Vulkan session's device side: the app's objects (not owned) and the
+// runtime's own command pool, fence and capture buffer (owned).
+struct VulkanSession {
+  VkInstance instance = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_device = VK_NULL_HANDLE;
+  VkDevice device = VK_NULL_HANDLE;
+  uint32_t queue_family = 0;
+  uint32_t queue_index = 0;
+  VkQueue queue = VK_NULL_HANDLE;
+  VkInstanceFunctions vki;
+  VkDeviceFunctions vkd;
+  VkPhysicalDeviceMemoryProperties memory{};
+
+  VkCommandPool pool = VK_NULL_HANDLE;
+  VkCommandBuffer commands = VK_NULL_HANDLE;
+  VkFence fence = VK_NULL_HANDLE;
+  VkBuffer staging = VK_NULL_HANDLE;  // host-visible, coherent; grows as needed
+  VkDeviceMemory staging_memory = VK_NULL_HANDLE;
+  void* staging_data = nullptr;
+  VkDeviceSize staging_size = 0;
 };
 
 struct SessionState {
@@ -185,6 +399,27 @@ struct SessionState {
   bool running = false;
   bool frame_waited = false;  // xrWaitFrame returned, xrBeginFrame not yet called
   bool frame_begun = false;   // xrBeginFrame returned, xrEndFrame not yet called
+  std::shared_ptr<VulkanSession> vulkan;  // null for a headless session
+
+  // Counters, and the environment as it was when the session was created.
+  uint64_t frames_ended = 0;
+  uint64_t projection_layers = 0;
+  uint32_t frames_captured = 0;
+  uint32_t exit_after_frames = 0;  // 0: never
+  std::string capture_dir;         // empty: no capture
+  uint32_t capture_frames = kDefaultCaptureFrames;  // 0: every frame
+};
+
+struct SwapchainState {
+  uint64_t session = 0;
+  VkFormat format = VK_FORMAT_UNDEFINED;
+  uint32_t width = 0, height = 0, array_size = 1, mip_count = 1;
+  std::vector<VkImage> images;
+  std::vector<VkDeviceMemory> memory;
+  uint32_t next = 0;                       // the image the next acquire returns
+  std::optional<uint32_t> acquired;        // acquired and not yet released
+  bool waited = false;                     // the acquired image was waited on
+  std::optional<uint32_t> last_released;   // what a projection layer shows
 };
 
 struct SpaceState {
@@ -207,6 +442,7 @@ struct Registry {
   std::unordered_map<uint64_t, SessionState> sessions;
   std::unordered_map<uint64_t, SpaceState> spaces;
   std::unordered_map<uint64_t, HandTrackerState> hand_trackers;
+  std::unordered_map<uint64_t, SwapchainState> swapchains;
 };
 
 Registry& registry() {
@@ -240,12 +476,124 @@ void push_state(Registry& reg, uint64_t session_id, XrSessionState state) {
   reg.instances.at(session.instance).events.push_back(event);
 }
 
+// ---------------------------------------------------- vulkan helpers --
+// All run with the registry mutex held, on the session's queue (the app must
+// not use that queue from another thread during the OpenXR call, as the spec says).
+
+uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t allowed,
+                     VkMemoryPropertyFlags wanted) {
+  for (uint32_t i = 0; i < properties.memoryTypeCount; ++i) {
+    if ((allowed & (1u << i)) && (properties.memoryTypes[i].propertyFlags & wanted) == wanted) return i;
+  }
+  throw VulkanError("finding a memory type", VK_ERROR_OUT_OF_DEVICE_MEMORY);
+}
+
+// Records with `record`, submits on the session's queue and waits for it.
+template <class Record>
+void submit_and_wait(VulkanSession& vk, Record&& record) {
+  const VkDeviceFunctions& f = vk.vkd;
+  check(f.vkResetFences(vk.device, 1, &vk.fence), "vkResetFences");
+  check(f.vkResetCommandBuffer(vk.commands, 0), "vkResetCommandBuffer");
+  VkCommandBufferBeginInfo begin{};
+  begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  check(f.vkBeginCommandBuffer(vk.commands, &begin), "vkBeginCommandBuffer");
+  record(vk.commands);
+  check(f.vkEndCommandBuffer(vk.commands), "vkEndCommandBuffer");
+  VkSubmitInfo submit{};
+  submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+  submit.commandBufferCount = 1;
+  submit.pCommandBuffers = &vk.commands;
+  check(f.vkQueueSubmit(vk.queue, 1, &submit, vk.fence), "vkQueueSubmit");
+  check(f.vkWaitForFences(vk.device, 1, &vk.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+}
+
+VkImageMemoryBarrier image_barrier(VkImage image, VkImageLayout from, VkImageLayout to, VkAccessFlags src_access,
+                                   VkAccessFlags dst_access) {
+  VkImageMemoryBarrier barrier{};
+  barrier.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+  barrier.srcAccessMask = src_access;
+  barrier.dstAccessMask = dst_access;
+  barrier.oldLayout = from;
+  barrier.newLayout = to;
+  barrier.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  barrier.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  barrier.image = image;
+  barrier.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, VK_REMAINING_MIP_LEVELS, 0, VK_REMAINING_ARRAY_LAYERS};
+  return barrier;
+}
+
+void destroy_swapchain_images(VulkanSession& vk, SwapchainState& swapchain) {
+  for (VkImage image : swapchain.images) vk.vkd.vkDestroyImage(vk.device, image, nullptr);
+  for (VkDeviceMemory memory : swapchain.memory) vk.vkd.vkFreeMemory(vk.device, memory, nullptr);
+  swapchain.images.clear();
+  swapchain.memory.clear();
+}
+
+void destroy_staging(VulkanSession& vk) {
+  if (vk.staging_data != nullptr) vk.vkd.vkUnmapMemory(vk.device, vk.staging_memory);
+  if (vk.staging != VK_NULL_HANDLE) vk.vkd.vkDestroyBuffer(vk.device, vk.staging, nullptr);
+  if (vk.staging_memory != VK_NULL_HANDLE) vk.vkd.vkFreeMemory(vk.device, vk.staging_memory, nullptr);
+  vk.staging_data = nullptr;
+  vk.staging = VK_NULL_HANDLE;
+  vk.staging_memory = VK_NULL_HANDLE;
+  vk.staging_size = 0;
+}
+
+// The runtime's own objects; the app's device, queue and instance stay.
+void destroy_vulkan_session(VulkanSession& vk) {
+  destroy_staging(vk);
+  if (vk.fence != VK_NULL_HANDLE) vk.vkd.vkDestroyFence(vk.device, vk.fence, nullptr);
+  if (vk.pool != VK_NULL_HANDLE) vk.vkd.vkDestroyCommandPool(vk.device, vk.pool, nullptr);  // frees `commands`
+  vk.fence = VK_NULL_HANDLE;
+  vk.pool = VK_NULL_HANDLE;
+  vk.commands = VK_NULL_HANDLE;
+}
+
+void ensure_staging(VulkanSession& vk, VkDeviceSize size) {
+  if (vk.staging_size >= size) return;
+  destroy_staging(vk);
+  const VkDeviceFunctions& f = vk.vkd;
+  VkBufferCreateInfo info{};
+  info.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
+  info.size = size;
+  info.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+  info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  check(f.vkCreateBuffer(vk.device, &info, nullptr, &vk.staging), "vkCreateBuffer (capture)");
+  VkMemoryRequirements requirements{};
+  f.vkGetBufferMemoryRequirements(vk.device, vk.staging, &requirements);
+  VkMemoryAllocateInfo allocate{};
+  allocate.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+  allocate.allocationSize = requirements.size;
+  allocate.memoryTypeIndex = memory_type(vk.memory, requirements.memoryTypeBits,
+                                         VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
+  check(f.vkAllocateMemory(vk.device, &allocate, nullptr, &vk.staging_memory), "vkAllocateMemory (capture)");
+  check(f.vkBindBufferMemory(vk.device, vk.staging, vk.staging_memory, 0), "vkBindBufferMemory (capture)");
+  check(f.vkMapMemory(vk.device, vk.staging_memory, 0, VK_WHOLE_SIZE, 0, &vk.staging_data), "vkMapMemory (capture)");
+  vk.staging_size = size;
+}
+
 // Callers hold the registry mutex.
 void destroy_session_locked(Registry& reg, uint64_t session_id) {
   std::erase_if(reg.spaces, [&](const auto& kv) { return kv.second.session == session_id; });
   std::erase_if(reg.hand_trackers, [&](const auto& kv) { return kv.second.session == session_id; });
   auto it = reg.sessions.find(session_id);
   if (it == reg.sessions.end()) return;
+  if (VulkanSession* vk = it->second.vulkan.get()) {
+    // The app's device must still exist (the spec has it outlive the session).
+    vk->vkd.vkDeviceWaitIdle(vk->device);
+    for (auto& [id, swapchain] : reg.swapchains) {
+      if (swapchain.session == session_id) destroy_swapchain_images(*vk, swapchain);
+    }
+    destroy_vulkan_session(*vk);
+  }
+  std::erase_if(reg.swapchains, [&](const auto& kv) { return kv.second.session == session_id; });
+  if (log_calls()) {
+    const SessionState& s = it->second;
+    warn("session 0x%llx destroyed: %llu frames ended, %llu projection layers, %u frames captured",
+         static_cast<unsigned long long>(session_id), static_cast<unsigned long long>(s.frames_ended),
+         static_cast<unsigned long long>(s.projection_layers), s.frames_captured);
+  }
   if (InstanceState* instance = find(reg.instances, it->second.instance)) {
     const XrSession handle = to_handle<XrSession>(session_id);
     std::erase_if(instance->events, [&](const auto& e) { return e.session == handle; });
@@ -267,12 +615,100 @@ XrResult two_call(uint32_t capacity, uint32_t* count_output, T* items, uint32_t 
   return XR_SUCCESS;
 }
 
-bool chain_has_graphics_binding(const void* next) {
+// Any graphics binding other than `except`.
+bool chain_has_graphics_binding(const void* next, XrStructureType except = XR_TYPE_UNKNOWN) {
   for (auto* s = static_cast<const XrBaseInStructure*>(next); s != nullptr; s = s->next) {
+    if (s->type == except) continue;
     const char* name = structure_type_name(s->type);
     if (name != nullptr && std::string_view(name).starts_with("XR_TYPE_GRAPHICS_BINDING_")) return true;
   }
   return false;
+}
+
+// The first XR_KHR_vulkan_enable(2) binding in a chain (same structure, same type value).
+const XrGraphicsBindingVulkanKHR* find_vulkan_binding(const void* next) {
+  for (auto* s = static_cast<const XrBaseInStructure*>(next); s != nullptr; s = s->next) {
+    if (s->type == XR_TYPE_GRAPHICS_BINDING_VULKAN_KHR) return reinterpret_cast<const XrGraphicsBindingVulkanKHR*>(s);
+  }
+  return nullptr;
+}
+
+// Checks a Vulkan graphics binding against what this instance created, then
+// sets up the runtime's side of the session. Callers hold the registry mutex.
+XrResult create_vulkan_session(const InstanceState& instance, const XrGraphicsBindingVulkanKHR& binding,
+                               std::shared_ptr<VulkanSession>& out) {
+  const VulkanInstanceRecord* vk_instance = instance.vulkan_instance(binding.instance);
+  if (vk_instance == nullptr) {
+    if (log_calls()) warn("xrCreateSession: the VkInstance was not created with xrCreateVulkanInstanceKHR");
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
+  if (binding.physicalDevice == VK_NULL_HANDLE || binding.physicalDevice != instance.graphics_device ||
+      binding.instance != instance.graphics_device_instance) {
+    if (log_calls()) warn("xrCreateSession: the VkPhysicalDevice is not what xrGetVulkanGraphicsDevice2KHR returned");
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
+  const VulkanDeviceRecord* vk_device = instance.vulkan_device(binding.device);
+  if (vk_device == nullptr || vk_device->physical_device != binding.physicalDevice ||
+      vk_device->instance != binding.instance) {
+    if (log_calls()) warn("xrCreateSession: the VkDevice was not created with xrCreateVulkanDeviceKHR on that device");
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
+  const bool queue_created = std::any_of(vk_device->queues.begin(), vk_device->queues.end(), [&](const auto& q) {
+    return q.first == binding.queueFamilyIndex && binding.queueIndex < q.second;
+  });
+  if (!queue_created) {
+    if (log_calls()) warn("xrCreateSession: the device has no queue %u in family %u", binding.queueIndex,
+                          binding.queueFamilyIndex);
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
+
+  auto vk = std::make_shared<VulkanSession>();
+  vk->instance = binding.instance;
+  vk->physical_device = binding.physicalDevice;
+  vk->device = binding.device;
+  vk->queue_family = binding.queueFamilyIndex;
+  vk->queue_index = binding.queueIndex;
+  if (const char* missing = load(vk->vki, vk_instance->get_instance_proc_addr, binding.instance)) {
+    warn("xrCreateSession: vkGetInstanceProcAddr has no %s", missing);
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  if (const char* missing = load(vk->vkd, vk->vki.vkGetDeviceProcAddr, binding.device)) {
+    warn("xrCreateSession: vkGetDeviceProcAddr has no %s", missing);
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  uint32_t family_count = 0;
+  vk->vki.vkGetPhysicalDeviceQueueFamilyProperties(binding.physicalDevice, &family_count, nullptr);
+  std::vector<VkQueueFamilyProperties> families(family_count);
+  vk->vki.vkGetPhysicalDeviceQueueFamilyProperties(binding.physicalDevice, &family_count, families.data());
+  if (binding.queueFamilyIndex >= family_count ||
+      (families[binding.queueFamilyIndex].queueFlags & VK_QUEUE_GRAPHICS_BIT) == 0) {
+    if (log_calls()) warn("xrCreateSession: queue family %u is not a graphics family", binding.queueFamilyIndex);
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
+  vk->vki.vkGetPhysicalDeviceMemoryProperties(binding.physicalDevice, &vk->memory);
+  vk->vkd.vkGetDeviceQueue(binding.device, binding.queueFamilyIndex, binding.queueIndex, &vk->queue);
+
+  try {
+    VkCommandPoolCreateInfo pool{};
+    pool.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    pool.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    pool.queueFamilyIndex = binding.queueFamilyIndex;
+    check(vk->vkd.vkCreateCommandPool(vk->device, &pool, nullptr, &vk->pool), "vkCreateCommandPool");
+    VkCommandBufferAllocateInfo allocate{};
+    allocate.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    allocate.commandPool = vk->pool;
+    allocate.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    allocate.commandBufferCount = 1;
+    check(vk->vkd.vkAllocateCommandBuffers(vk->device, &allocate, &vk->commands), "vkAllocateCommandBuffers");
+    VkFenceCreateInfo fence{};
+    fence.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+    check(vk->vkd.vkCreateFence(vk->device, &fence, nullptr, &vk->fence), "vkCreateFence");
+  } catch (...) {
+    destroy_vulkan_session(*vk);
+    throw;
+  }
+  out = std::move(vk);
+  return XR_SUCCESS;
 }
 
 bool is_valid_pose(const XrPosef& pose) {
@@ -306,6 +742,128 @@ bool is_well_formed_path(std::string_view path) {
 constexpr XrSpaceLocationFlags kAllLocationFlags =
     XR_SPACE_LOCATION_ORIENTATION_VALID_BIT | XR_SPACE_LOCATION_POSITION_VALID_BIT |
     XR_SPACE_LOCATION_ORIENTATION_TRACKED_BIT | XR_SPACE_LOCATION_POSITION_TRACKED_BIT;
+
+// ------------------------------------------------------ frame end checks --
+// One projection layer of a Vulkan session. Callers hold the registry mutex.
+XrResult check_projection_layer(Registry& reg, uint64_t session_id, const XrCompositionLayerProjection& layer) {
+  const SpaceState* space = find(reg.spaces, id_of(layer.space));
+  if (space == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (space->session != session_id) return XR_ERROR_VALIDATION_FAILURE;
+  if (layer.viewCount != kViewCount || layer.views == nullptr) return XR_ERROR_VALIDATION_FAILURE;
+  for (uint32_t v = 0; v < layer.viewCount; ++v) {
+    const XrCompositionLayerProjectionView& view = layer.views[v];
+    if (view.type != XR_TYPE_COMPOSITION_LAYER_PROJECTION_VIEW) return XR_ERROR_VALIDATION_FAILURE;
+    if (!is_valid_pose(view.pose)) return XR_ERROR_POSE_INVALID;
+    const XrSwapchainSubImage& sub = view.subImage;
+    const SwapchainState* swapchain = find(reg.swapchains, id_of(sub.swapchain));
+    if (swapchain == nullptr) return XR_ERROR_HANDLE_INVALID;
+    if (swapchain->session != session_id) return XR_ERROR_VALIDATION_FAILURE;
+    // The image shown is the last one released; none may still be held.
+    if (!swapchain->last_released || swapchain->acquired) return XR_ERROR_LAYER_INVALID;
+    const XrRect2Di& r = sub.imageRect;
+    if (r.offset.x < 0 || r.offset.y < 0 || r.extent.width <= 0 || r.extent.height <= 0 ||
+        int64_t{r.offset.x} + r.extent.width > int64_t{swapchain->width} ||
+        int64_t{r.offset.y} + r.extent.height > int64_t{swapchain->height}) {
+      return XR_ERROR_SWAPCHAIN_RECT_INVALID;
+    }
+    if (sub.imageArrayIndex >= swapchain->array_size) return XR_ERROR_VALIDATION_FAILURE;
+  }
+  return XR_SUCCESS;
+}
+
+// Copies each view's imageRect of its swapchain's last released image to
+// <capture_dir>/frame_NNNN_view_V.png (NNNN: this xrEndFrame's index in the
+// session, from 0). The app left the images in COLOR_ATTACHMENT_OPTIMAL; they
+// go to TRANSFER_SRC_OPTIMAL for the copy and back. Callers hold the registry
+// mutex and checked the layer.
+XrResult capture_projection(Registry& reg, const SessionState& session, const XrCompositionLayerProjection& layer) {
+  VulkanSession& vk = *session.vulkan;
+  struct Region {
+    VkImage image;
+    VkFormat format;
+    XrRect2Di rect;
+    uint32_t array_layer;
+    VkDeviceSize offset;
+  };
+  std::vector<Region> regions;
+  std::vector<VkImage> images;  // each once: one layout transition per image
+  VkDeviceSize total = 0;
+  for (uint32_t v = 0; v < layer.viewCount; ++v) {
+    const XrSwapchainSubImage& sub = layer.views[v].subImage;
+    const SwapchainState& swapchain = reg.swapchains.at(id_of(sub.swapchain));
+    const VkImage image = swapchain.images[*swapchain.last_released];
+    regions.push_back({image, swapchain.format, sub.imageRect, sub.imageArrayIndex, total});
+    total += VkDeviceSize{4} * static_cast<uint32_t>(sub.imageRect.extent.width) *
+             static_cast<uint32_t>(sub.imageRect.extent.height);
+    if (std::find(images.begin(), images.end(), image) == images.end()) images.push_back(image);
+  }
+  ensure_staging(vk, total);
+
+  submit_and_wait(vk, [&](VkCommandBuffer commands) {
+    const VkDeviceFunctions& f = vk.vkd;
+    std::vector<VkImageMemoryBarrier> barriers;
+    for (VkImage image : images) {
+      barriers.push_back(image_barrier(image, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL,
+                                       VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_ACCESS_MEMORY_WRITE_BIT,
+                                       VK_ACCESS_TRANSFER_READ_BIT));
+    }
+    f.vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr,
+                           0, nullptr, static_cast<uint32_t>(barriers.size()), barriers.data());
+    for (const Region& region : regions) {
+      VkBufferImageCopy copy{};
+      copy.bufferOffset = region.offset;
+      copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, region.array_layer, 1};
+      copy.imageOffset = {region.rect.offset.x, region.rect.offset.y, 0};
+      copy.imageExtent = {static_cast<uint32_t>(region.rect.extent.width),
+                          static_cast<uint32_t>(region.rect.extent.height), 1};
+      f.vkCmdCopyImageToBuffer(commands, region.image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, vk.staging, 1, &copy);
+    }
+    barriers.clear();
+    for (VkImage image : images) {
+      barriers.push_back(image_barrier(image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                                       VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, 0,
+                                       VK_ACCESS_MEMORY_READ_BIT | VK_ACCESS_MEMORY_WRITE_BIT));
+    }
+    VkBufferMemoryBarrier to_host{};
+    to_host.sType = VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER;
+    to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    to_host.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    to_host.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    to_host.buffer = vk.staging;
+    to_host.offset = 0;
+    to_host.size = VK_WHOLE_SIZE;
+    f.vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                           VK_PIPELINE_STAGE_ALL_COMMANDS_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1, &to_host,
+                           static_cast<uint32_t>(barriers.size()), barriers.data());
+  });
+
+  std::error_code ec;
+  std::filesystem::create_directories(session.capture_dir, ec);
+  if (ec) {
+    warn("capture: cannot create %s: %s", session.capture_dir.c_str(), ec.message().c_str());
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  std::vector<unsigned char> rgba;
+  for (uint32_t v = 0; v < regions.size(); ++v) {
+    const Region& region = regions[v];
+    const int w = region.rect.extent.width, h = region.rect.extent.height;
+    const auto* pixels = static_cast<const unsigned char*>(vk.staging_data) + region.offset;
+    rgba.assign(pixels, pixels + std::size_t{4} * static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+    if (region.format == VK_FORMAT_B8G8R8A8_SRGB) {
+      for (std::size_t i = 0; i < rgba.size(); i += 4) std::swap(rgba[i], rgba[i + 2]);
+    }
+    char name[64];
+    std::snprintf(name, sizeof name, "frame_%04llu_view_%u.png",
+                  static_cast<unsigned long long>(session.frames_ended - 1), v);
+    const std::string path = (std::filesystem::path(session.capture_dir) / name).string();
+    if (stbi_write_png(path.c_str(), w, h, 4, rgba.data(), w * 4) == 0) {
+      warn("capture: cannot write %s", path.c_str());
+      return XR_ERROR_RUNTIME_FAILURE;
+    }
+  }
+  return XR_SUCCESS;
+}
 
 }  // namespace
 
@@ -362,6 +920,9 @@ XrResult xrCreateInstance(const XrInstanceCreateInfo* info, XrInstance* instance
         break;
       case Ext::hand_tracking:
         state.hand_tracking = true;
+        break;
+      case Ext::vulkan_enable2:
+        state.vulkan_enable2 = true;
         break;
       case Ext::none:
         break;
@@ -508,12 +1069,31 @@ XrResult xrCreateSession(XrInstance instance, const XrSessionCreateInfo* info, X
     return XR_ERROR_VALIDATION_FAILURE;
   }
   if (info->systemId != kSystemId) return XR_ERROR_SYSTEM_INVALID;
-  // Headless only: without XR_MND_headless, or with any graphics binding, the
-  // session would need a graphics device this runtime does not have.
-  if (!state->headless || chain_has_graphics_binding(info->next)) return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  // A Vulkan binding when XR_KHR_vulkan_enable2 is enabled; else headless
+  // (XR_MND_headless, no binding at all). Any other binding names a graphics
+  // device this runtime does not have.
+  const XrGraphicsBindingVulkanKHR* vulkan_binding = state->vulkan_enable2 ? find_vulkan_binding(info->next) : nullptr;
+  std::shared_ptr<VulkanSession> vulkan;
+  if (vulkan_binding != nullptr) {
+    // A second binding of another API as well is not a Vulkan session.
+    if (chain_has_graphics_binding(info->next, XR_TYPE_GRAPHICS_BINDING_VULKAN_KHR)) {
+      return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+    }
+    if (!state->vulkan_requirements_queried) return XR_ERROR_GRAPHICS_REQUIREMENTS_CALL_MISSING;
+    if (const XrResult r = create_vulkan_session(*state, *vulkan_binding, vulkan); XR_FAILED(r)) return r;
+  } else if (!state->headless || chain_has_graphics_binding(info->next)) {
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
 
+  SessionState session_state;
+  session_state.instance = instance_id;
+  session_state.vulkan = std::move(vulkan);
+  session_state.exit_after_frames = env_uint("PROPRIO_MOCK_RUNTIME_EXIT_AFTER_FRAMES", 0).value_or(0);
+  if (const char* dir = std::getenv("PROPRIO_MOCK_RUNTIME_CAPTURE_DIR")) session_state.capture_dir = dir;
+  session_state.capture_frames =
+      env_uint("PROPRIO_MOCK_RUNTIME_CAPTURE_FRAMES", kDefaultCaptureFrames).value_or(kDefaultCaptureFrames);
   const uint64_t id = reg.next_id++;
-  reg.sessions.emplace(id, SessionState{instance_id});
+  reg.sessions.emplace(id, std::move(session_state));
   push_state(reg, id, XR_SESSION_STATE_IDLE);
   push_state(reg, id, XR_SESSION_STATE_READY);
   *session = to_handle<XrSession>(id);
@@ -613,6 +1193,9 @@ XrResult xrBeginSession(XrSession session, const XrSessionBeginInfo* info) {
   if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
   // XR_MND_headless: the primary view configuration is not used, so any value is accepted.
   if (info == nullptr || info->type != XR_TYPE_SESSION_BEGIN_INFO) return XR_ERROR_VALIDATION_FAILURE;
+  if (state->vulkan && info->primaryViewConfigurationType != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) {
+    return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+  }
   if (state->running) return XR_ERROR_SESSION_RUNNING;
   if (state->state != XR_SESSION_STATE_READY) return XR_ERROR_SESSION_NOT_READY;
   state->running = true;
@@ -623,17 +1206,23 @@ XrResult xrBeginSession(XrSession session, const XrSessionBeginInfo* info) {
   return XR_SUCCESS;
 }
 
+// For a running session; callers hold the registry mutex.
+void request_exit_locked(Registry& reg, uint64_t session_id) {
+  const SessionState& state = reg.sessions.at(session_id);
+  if (state.state == XR_SESSION_STATE_STOPPING) return;  // already on its way out
+  // Step down the lifecycle as a real runtime does: FOCUSED -> VISIBLE -> SYNCHRONIZED -> STOPPING.
+  if (state.state == XR_SESSION_STATE_FOCUSED) push_state(reg, session_id, XR_SESSION_STATE_VISIBLE);
+  if (state.state == XR_SESSION_STATE_VISIBLE) push_state(reg, session_id, XR_SESSION_STATE_SYNCHRONIZED);
+  push_state(reg, session_id, XR_SESSION_STATE_STOPPING);
+}
+
 XrResult xrRequestExitSession(XrSession session) {
   Registry& reg = registry();
   std::lock_guard lock(reg.mutex);
   SessionState* state = find(reg.sessions, id_of(session));
   if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
   if (!state->running) return XR_ERROR_SESSION_NOT_RUNNING;
-  if (state->state == XR_SESSION_STATE_STOPPING) return XR_SUCCESS;  // already on its way out
-  // Step down the lifecycle as a real runtime does: FOCUSED -> VISIBLE -> SYNCHRONIZED -> STOPPING.
-  if (state->state == XR_SESSION_STATE_FOCUSED) push_state(reg, id_of(session), XR_SESSION_STATE_VISIBLE);
-  if (state->state == XR_SESSION_STATE_VISIBLE) push_state(reg, id_of(session), XR_SESSION_STATE_SYNCHRONIZED);
-  push_state(reg, id_of(session), XR_SESSION_STATE_STOPPING);
+  request_exit_locked(reg, id_of(session));
   return XR_SUCCESS;
 }
 
@@ -714,8 +1303,27 @@ XrResult xrEndFrame(XrSession session, const XrFrameEndInfo* info) {
   }
   if (info->layerCount > kMaxLayerCount) return XR_ERROR_LAYER_LIMIT_EXCEEDED;
   // A headless session has no swapchains, so no layer can be valid.
-  if (info->layerCount > 0) return XR_ERROR_LAYER_INVALID;
+  if (info->layerCount > 0 && state->vulkan == nullptr) return XR_ERROR_LAYER_INVALID;
+  const uint64_t session_id = id_of(session);
+  const XrCompositionLayerProjection* first_projection = nullptr;
+  for (uint32_t i = 0; i < info->layerCount; ++i) {
+    const XrCompositionLayerBaseHeader* layer = info->layers[i];
+    if (layer == nullptr || layer->type != XR_TYPE_COMPOSITION_LAYER_PROJECTION) return XR_ERROR_LAYER_INVALID;
+    const auto* projection = reinterpret_cast<const XrCompositionLayerProjection*>(layer);
+    if (const XrResult r = check_projection_layer(reg, session_id, *projection); XR_FAILED(r)) return r;
+    if (first_projection == nullptr) first_projection = projection;
+  }
   state->frame_begun = false;
+  ++state->frames_ended;
+  state->projection_layers += info->layerCount;
+  if (state->exit_after_frames != 0 && state->frames_ended >= state->exit_after_frames) {
+    request_exit_locked(reg, session_id);
+  }
+  if (first_projection != nullptr && !state->capture_dir.empty() &&
+      (state->capture_frames == 0 || state->frames_captured < state->capture_frames)) {
+    ++state->frames_captured;
+    return capture_projection(reg, *state, *first_projection);
+  }
   return XR_SUCCESS;
 }
 
@@ -747,6 +1355,438 @@ XrResult xrPathToString(XrInstance instance, XrPath path, uint32_t capacity, uin
     c = i < text.size() ? text[i] : '\0';
     return XR_SUCCESS;
   });
+}
+
+// ---- views: PRIMARY_STEREO ----
+XrResult check_system(XrInstance instance, XrSystemId system_id) {
+  if (!instance_exists(instance)) return XR_ERROR_HANDLE_INVALID;
+  return system_id == kSystemId ? XR_SUCCESS : XR_ERROR_SYSTEM_INVALID;
+}
+
+XrResult xrEnumerateViewConfigurations(XrInstance instance, XrSystemId system_id, uint32_t capacity, uint32_t* count,
+                                       XrViewConfigurationType* types) {
+  if (const XrResult r = check_system(instance, system_id); XR_FAILED(r)) return r;
+  return two_call(capacity, count, types, 1, [](XrViewConfigurationType& t, uint32_t) {
+    t = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+    return XR_SUCCESS;
+  });
+}
+
+XrResult xrGetViewConfigurationProperties(XrInstance instance, XrSystemId system_id, XrViewConfigurationType type,
+                                          XrViewConfigurationProperties* properties) {
+  if (const XrResult r = check_system(instance, system_id); XR_FAILED(r)) return r;
+  if (type != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+  if (properties == nullptr || properties->type != XR_TYPE_VIEW_CONFIGURATION_PROPERTIES) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  properties->viewConfigurationType = type;
+  properties->fovMutable = XR_FALSE;
+  return XR_SUCCESS;
+}
+
+XrResult xrEnumerateViewConfigurationViews(XrInstance instance, XrSystemId system_id, XrViewConfigurationType type,
+                                           uint32_t capacity, uint32_t* count, XrViewConfigurationView* views) {
+  if (const XrResult r = check_system(instance, system_id); XR_FAILED(r)) return r;
+  if (type != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+  const XrExtent2Di size = view_size();
+  return two_call(capacity, count, views, kViewCount, [&](XrViewConfigurationView& view, uint32_t) {
+    if (view.type != XR_TYPE_VIEW_CONFIGURATION_VIEW) return XR_ERROR_VALIDATION_FAILURE;
+    view.recommendedImageRectWidth = static_cast<uint32_t>(size.width);
+    view.recommendedImageRectHeight = static_cast<uint32_t>(size.height);
+    view.maxImageRectWidth = kMaxImageSize;
+    view.maxImageRectHeight = kMaxImageSize;
+    view.recommendedSwapchainSampleCount = 1;
+    view.maxSwapchainSampleCount = 1;
+    return XR_SUCCESS;
+  });
+}
+
+// Each eye is the VIEW space moved -/+ kHalfIpdM along its own x axis.
+XrResult xrLocateViews(XrSession session, const XrViewLocateInfo* info, XrViewState* view_state, uint32_t capacity,
+                       uint32_t* count, XrView* views) {
+  SpaceState base;
+  {
+    Registry& reg = registry();
+    std::lock_guard lock(reg.mutex);
+    if (find(reg.sessions, id_of(session)) == nullptr) return XR_ERROR_HANDLE_INVALID;
+    if (info == nullptr || info->type != XR_TYPE_VIEW_LOCATE_INFO) return XR_ERROR_VALIDATION_FAILURE;
+    const SpaceState* space = find(reg.spaces, id_of(info->space));
+    if (space == nullptr) return XR_ERROR_HANDLE_INVALID;
+    if (space->session != id_of(session)) return XR_ERROR_VALIDATION_FAILURE;
+    base = *space;
+  }
+  if (info->viewConfigurationType != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) {
+    return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+  }
+  if (view_state == nullptr || view_state->type != XR_TYPE_VIEW_STATE) return XR_ERROR_VALIDATION_FAILURE;
+  if (info->displayTime <= 0) return XR_ERROR_TIME_INVALID;
+  const XrResult result = two_call(capacity, count, views, kViewCount, [&](XrView& view, uint32_t i) {
+    if (view.type != XR_TYPE_VIEW) return XR_ERROR_VALIDATION_FAILURE;
+    XrPosef eye = mx::kIdentityPose;
+    eye.position.x = i == 0 ? -kHalfIpdM : kHalfIpdM;
+    view.pose = mx::locate(XR_REFERENCE_SPACE_TYPE_VIEW, eye, base.type, base.offset, info->displayTime).pose;
+    view.fov = kFov;
+    return XR_SUCCESS;
+  });
+  if (XR_SUCCEEDED(result)) {
+    view_state->viewStateFlags = XR_VIEW_STATE_ORIENTATION_VALID_BIT | XR_VIEW_STATE_POSITION_VALID_BIT |
+                                 XR_VIEW_STATE_ORIENTATION_TRACKED_BIT | XR_VIEW_STATE_POSITION_TRACKED_BIT;
+  }
+  return result;
+}
+
+// ---- swapchains (Vulkan sessions only) ----
+XrResult xrEnumerateSwapchainFormats(XrSession session, uint32_t capacity, uint32_t* count, int64_t* formats) {
+  bool vulkan = false;
+  {
+    Registry& reg = registry();
+    std::lock_guard lock(reg.mutex);
+    const SessionState* state = find(reg.sessions, id_of(session));
+    if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+    vulkan = state->vulkan != nullptr;
+  }
+  // A headless session has no formats at all.
+  const auto n = vulkan ? static_cast<uint32_t>(std::size(kSwapchainFormats)) : 0u;
+  return two_call(capacity, count, formats, n, [](int64_t& format, uint32_t i) {
+    format = kSwapchainFormats[i];
+    return XR_SUCCESS;
+  });
+}
+
+XrResult xrCreateSwapchain(XrSession session, const XrSwapchainCreateInfo* info, XrSwapchain* swapchain) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t session_id = id_of(session);
+  const SessionState* state = find(reg.sessions, session_id);
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || swapchain == nullptr || info->type != XR_TYPE_SWAPCHAIN_CREATE_INFO) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (state->vulkan == nullptr) return XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED;  // headless: no formats
+  constexpr XrSwapchainCreateFlags kKnownFlags =
+      XR_SWAPCHAIN_CREATE_PROTECTED_CONTENT_BIT | XR_SWAPCHAIN_CREATE_STATIC_IMAGE_BIT;
+  if ((info->createFlags & ~kKnownFlags) != 0) return XR_ERROR_VALIDATION_FAILURE;
+  if (info->createFlags != 0) return XR_ERROR_FEATURE_UNSUPPORTED;  // neither protected nor static images
+  if (std::find(std::begin(kSwapchainFormats), std::end(kSwapchainFormats), info->format) ==
+      std::end(kSwapchainFormats)) {
+    return XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED;
+  }
+  if (info->sampleCount == 0 || info->width == 0 || info->height == 0 || info->faceCount == 0 ||
+      info->arraySize == 0 || info->mipCount == 0 || info->width > kMaxImageSize || info->height > kMaxImageSize) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (info->sampleCount != 1 || info->faceCount != 1) return XR_ERROR_FEATURE_UNSUPPORTED;
+
+  // Usage: what the app asks for, plus what the runtime needs itself: colour
+  // attachment (the layout it hands images over in), transfer dst (the fresh
+  // image clear) and transfer src (capture).
+  constexpr XrSwapchainUsageFlags kKnownUsage =
+      XR_SWAPCHAIN_USAGE_COLOR_ATTACHMENT_BIT | XR_SWAPCHAIN_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT |
+      XR_SWAPCHAIN_USAGE_UNORDERED_ACCESS_BIT | XR_SWAPCHAIN_USAGE_TRANSFER_SRC_BIT |
+      XR_SWAPCHAIN_USAGE_TRANSFER_DST_BIT | XR_SWAPCHAIN_USAGE_SAMPLED_BIT | XR_SWAPCHAIN_USAGE_MUTABLE_FORMAT_BIT;
+  if ((info->usageFlags & ~kKnownUsage) != 0) return XR_ERROR_VALIDATION_FAILURE;  // input attachment: not offered
+  if (info->usageFlags & XR_SWAPCHAIN_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT) return XR_ERROR_FEATURE_UNSUPPORTED;
+  VkImageUsageFlags usage =
+      VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+  if (info->usageFlags & XR_SWAPCHAIN_USAGE_UNORDERED_ACCESS_BIT) usage |= VK_IMAGE_USAGE_STORAGE_BIT;
+  if (info->usageFlags & XR_SWAPCHAIN_USAGE_SAMPLED_BIT) usage |= VK_IMAGE_USAGE_SAMPLED_BIT;
+  const VkImageCreateFlags flags =
+      (info->usageFlags & XR_SWAPCHAIN_USAGE_MUTABLE_FORMAT_BIT) ? VK_IMAGE_CREATE_MUTABLE_FORMAT_BIT : 0;
+
+  VulkanSession& vk = *state->vulkan;
+  const auto format = static_cast<VkFormat>(info->format);
+  VkImageFormatProperties limits{};
+  if (vk.vki.vkGetPhysicalDeviceImageFormatProperties(vk.physical_device, format, VK_IMAGE_TYPE_2D,
+                                                      VK_IMAGE_TILING_OPTIMAL, usage, flags, &limits) != VK_SUCCESS ||
+      info->arraySize > limits.maxArrayLayers || info->mipCount > limits.maxMipLevels) {
+    return XR_ERROR_FEATURE_UNSUPPORTED;
+  }
+
+  SwapchainState created;
+  created.session = session_id;
+  created.format = format;
+  created.width = info->width;
+  created.height = info->height;
+  created.array_size = info->arraySize;
+  created.mip_count = info->mipCount;
+  try {
+    const VkDeviceFunctions& f = vk.vkd;
+    for (uint32_t i = 0; i < kSwapchainImageCount; ++i) {
+      VkImageCreateInfo image_info{};
+      image_info.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
+      image_info.flags = flags;
+      image_info.imageType = VK_IMAGE_TYPE_2D;
+      image_info.format = format;
+      image_info.extent = {info->width, info->height, 1};
+      image_info.mipLevels = info->mipCount;
+      image_info.arrayLayers = info->arraySize;
+      image_info.samples = VK_SAMPLE_COUNT_1_BIT;
+      image_info.tiling = VK_IMAGE_TILING_OPTIMAL;
+      image_info.usage = usage;
+      image_info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+      image_info.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+      VkImage image = VK_NULL_HANDLE;
+      check(f.vkCreateImage(vk.device, &image_info, nullptr, &image), "vkCreateImage");
+      created.images.push_back(image);
+      VkMemoryRequirements requirements{};
+      f.vkGetImageMemoryRequirements(vk.device, image, &requirements);
+      VkMemoryAllocateInfo allocate{};
+      allocate.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+      allocate.allocationSize = requirements.size;
+      allocate.memoryTypeIndex =
+          memory_type(vk.memory, requirements.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+      VkDeviceMemory memory = VK_NULL_HANDLE;
+      check(f.vkAllocateMemory(vk.device, &allocate, nullptr, &memory), "vkAllocateMemory (swapchain)");
+      created.memory.push_back(memory);
+      check(f.vkBindImageMemory(vk.device, image, memory, 0), "vkBindImageMemory");
+    }
+    // Every image starts cleared to kFreshImageColour, in COLOR_ATTACHMENT_OPTIMAL.
+    submit_and_wait(vk, [&](VkCommandBuffer commands) {
+      std::vector<VkImageMemoryBarrier> barriers;
+      for (VkImage image : created.images) {
+        barriers.push_back(image_barrier(image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
+                                         VK_ACCESS_TRANSFER_WRITE_BIT));
+      }
+      f.vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0,
+                             nullptr, 0, nullptr, static_cast<uint32_t>(barriers.size()), barriers.data());
+      const VkImageSubresourceRange all{VK_IMAGE_ASPECT_COLOR_BIT, 0, VK_REMAINING_MIP_LEVELS, 0,
+                                        VK_REMAINING_ARRAY_LAYERS};
+      for (VkImage image : created.images) {
+        f.vkCmdClearColorImage(commands, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, &kFreshImageColour, 1, &all);
+      }
+      barriers.clear();
+      for (VkImage image : created.images) {
+        barriers.push_back(image_barrier(image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                                         VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_ACCESS_TRANSFER_WRITE_BIT,
+                                         VK_ACCESS_MEMORY_READ_BIT | VK_ACCESS_MEMORY_WRITE_BIT));
+      }
+      f.vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 0, 0,
+                             nullptr, 0, nullptr, static_cast<uint32_t>(barriers.size()), barriers.data());
+    });
+  } catch (...) {
+    vk.vkd.vkDeviceWaitIdle(vk.device);
+    destroy_swapchain_images(vk, created);
+    throw;
+  }
+  const uint64_t id = reg.next_id++;
+  reg.swapchains.emplace(id, std::move(created));
+  *swapchain = to_handle<XrSwapchain>(id);
+  return XR_SUCCESS;
+}
+
+XrResult xrDestroySwapchain(XrSwapchain swapchain) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  auto it = reg.swapchains.find(id_of(swapchain));
+  if (it == reg.swapchains.end()) return XR_ERROR_HANDLE_INVALID;
+  // Destroying a session takes its swapchains along, so the session exists.
+  VulkanSession& vk = *reg.sessions.at(it->second.session).vulkan;
+  vk.vkd.vkDeviceWaitIdle(vk.device);
+  destroy_swapchain_images(vk, it->second);
+  reg.swapchains.erase(it);
+  return XR_SUCCESS;
+}
+
+XrResult xrEnumerateSwapchainImages(XrSwapchain swapchain, uint32_t capacity, uint32_t* count,
+                                    XrSwapchainImageBaseHeader* images) {
+  std::vector<VkImage> list;
+  {
+    Registry& reg = registry();
+    std::lock_guard lock(reg.mutex);
+    const SwapchainState* state = find(reg.swapchains, id_of(swapchain));
+    if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+    list = state->images;
+  }
+  // Only Vulkan sessions have swapchains: the array is XrSwapchainImageVulkan(2)KHR.
+  auto* vulkan_images = reinterpret_cast<XrSwapchainImageVulkanKHR*>(images);
+  return two_call(capacity, count, vulkan_images, static_cast<uint32_t>(list.size()),
+                  [&](XrSwapchainImageVulkanKHR& image, uint32_t i) {
+                    if (image.type != XR_TYPE_SWAPCHAIN_IMAGE_VULKAN_KHR) return XR_ERROR_VALIDATION_FAILURE;
+                    image.image = list[i];
+                    return XR_SUCCESS;
+                  });
+}
+
+// Round robin, one image at a time: acquiring again before releasing is a
+// call-order error here (stricter than the spec, which allows several).
+XrResult xrAcquireSwapchainImage(XrSwapchain swapchain, const XrSwapchainImageAcquireInfo* info, uint32_t* index) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  SwapchainState* state = find(reg.swapchains, id_of(swapchain));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if ((info != nullptr && info->type != XR_TYPE_SWAPCHAIN_IMAGE_ACQUIRE_INFO) || index == nullptr) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (state->acquired) return XR_ERROR_CALL_ORDER_INVALID;
+  state->acquired = state->next;
+  state->waited = false;
+  state->next = (state->next + 1) % static_cast<uint32_t>(state->images.size());
+  *index = *state->acquired;
+  return XR_SUCCESS;
+}
+
+// The image is ready at once (nothing else uses it), whatever the timeout.
+XrResult xrWaitSwapchainImage(XrSwapchain swapchain, const XrSwapchainImageWaitInfo* info) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  SwapchainState* state = find(reg.swapchains, id_of(swapchain));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_SWAPCHAIN_IMAGE_WAIT_INFO) return XR_ERROR_VALIDATION_FAILURE;
+  if (!state->acquired || state->waited) return XR_ERROR_CALL_ORDER_INVALID;
+  state->waited = true;
+  return XR_SUCCESS;
+}
+
+XrResult xrReleaseSwapchainImage(XrSwapchain swapchain, const XrSwapchainImageReleaseInfo* info) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  SwapchainState* state = find(reg.swapchains, id_of(swapchain));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info != nullptr && info->type != XR_TYPE_SWAPCHAIN_IMAGE_RELEASE_INFO) return XR_ERROR_VALIDATION_FAILURE;
+  if (!state->acquired || !state->waited) return XR_ERROR_CALL_ORDER_INVALID;
+  state->last_released = state->acquired;
+  state->acquired.reset();
+  state->waited = false;
+  return XR_SUCCESS;
+}
+
+// ---- XR_KHR_vulkan_enable2 ----
+// The instance, if it exists and enabled the extension (else `error` says why).
+InstanceState* vulkan_instance_state(Registry& reg, XrInstance instance, XrResult& error) {
+  InstanceState* state = find(reg.instances, id_of(instance));
+  error = state == nullptr ? XR_ERROR_HANDLE_INVALID
+                           : (state->vulkan_enable2 ? XR_SUCCESS : XR_ERROR_FUNCTION_UNSUPPORTED);
+  return XR_SUCCEEDED(error) ? state : nullptr;
+}
+
+XrResult xrGetVulkanGraphicsRequirements2KHR(XrInstance instance, XrSystemId system_id,
+                                             XrGraphicsRequirementsVulkanKHR* requirements) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  XrResult error = XR_SUCCESS;
+  InstanceState* state = vulkan_instance_state(reg, instance, error);
+  if (state == nullptr) return error;
+  if (system_id != kSystemId) return XR_ERROR_SYSTEM_INVALID;
+  if (requirements == nullptr || requirements->type != XR_TYPE_GRAPHICS_REQUIREMENTS_VULKAN2_KHR) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  requirements->minApiVersionSupported = XR_MAKE_VERSION(1, 1, 0);
+  requirements->maxApiVersionSupported = XR_MAKE_VERSION(1, 3, 0);
+  state->vulkan_requirements_queried = true;
+  return XR_SUCCESS;
+}
+
+// The VkResult goes to *vulkan_result; the XrResult is about the OpenXR side
+// (XR_SUCCESS even when vkCreateInstance failed: check both).
+XrResult xrCreateVulkanInstanceKHR(XrInstance instance, const XrVulkanInstanceCreateInfoKHR* info,
+                                   VkInstance* vulkan_instance, VkResult* vulkan_result) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  XrResult error = XR_SUCCESS;
+  InstanceState* state = vulkan_instance_state(reg, instance, error);
+  if (state == nullptr) return error;
+  if (info == nullptr || vulkan_instance == nullptr || vulkan_result == nullptr ||
+      info->type != XR_TYPE_VULKAN_INSTANCE_CREATE_INFO_KHR || info->createFlags != 0 ||
+      info->pfnGetInstanceProcAddr == nullptr || info->vulkanCreateInfo == nullptr) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (info->systemId != kSystemId) return XR_ERROR_SYSTEM_INVALID;
+  auto create = reinterpret_cast<PFN_vkCreateInstance>(info->pfnGetInstanceProcAddr(VK_NULL_HANDLE, "vkCreateInstance"));
+  if (create == nullptr) {
+    warn("xrCreateVulkanInstanceKHR: pfnGetInstanceProcAddr has no vkCreateInstance");
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  *vulkan_result = create(info->vulkanCreateInfo, info->vulkanAllocator, vulkan_instance);
+  if (*vulkan_result == VK_SUCCESS) state->vulkan_instances.push_back({*vulkan_instance, info->pfnGetInstanceProcAddr});
+  return XR_SUCCESS;
+}
+
+// Lavapipe (a CPU device) when there is one, else the first device.
+XrResult xrGetVulkanGraphicsDevice2KHR(XrInstance instance, const XrVulkanGraphicsDeviceGetInfoKHR* info,
+                                       VkPhysicalDevice* physical_device) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  XrResult error = XR_SUCCESS;
+  InstanceState* state = vulkan_instance_state(reg, instance, error);
+  if (state == nullptr) return error;
+  if (info == nullptr || physical_device == nullptr || info->type != XR_TYPE_VULKAN_GRAPHICS_DEVICE_GET_INFO_KHR) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (info->systemId != kSystemId) return XR_ERROR_SYSTEM_INVALID;
+  const VulkanInstanceRecord* record = state->vulkan_instance(info->vulkanInstance);
+  if (record == nullptr) {
+    if (log_calls()) warn("xrGetVulkanGraphicsDevice2KHR: the VkInstance was not created with xrCreateVulkanInstanceKHR");
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  auto enumerate = reinterpret_cast<PFN_vkEnumeratePhysicalDevices>(
+      record->get_instance_proc_addr(record->instance, "vkEnumeratePhysicalDevices"));
+  auto properties_of = reinterpret_cast<PFN_vkGetPhysicalDeviceProperties>(
+      record->get_instance_proc_addr(record->instance, "vkGetPhysicalDeviceProperties"));
+  if (enumerate == nullptr || properties_of == nullptr) {
+    warn("xrGetVulkanGraphicsDevice2KHR: vkGetInstanceProcAddr has no vkEnumeratePhysicalDevices");
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  uint32_t count = 0;
+  check(enumerate(record->instance, &count, nullptr), "vkEnumeratePhysicalDevices");
+  std::vector<VkPhysicalDevice> devices(count);
+  const VkResult listed = enumerate(record->instance, &count, devices.data());
+  if (listed != VK_INCOMPLETE) check(listed, "vkEnumeratePhysicalDevices");
+  devices.resize(count);
+  if (devices.empty()) {
+    warn("xrGetVulkanGraphicsDevice2KHR: no Vulkan physical device");
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  VkPhysicalDevice chosen = devices.front();
+  for (VkPhysicalDevice device : devices) {
+    VkPhysicalDeviceProperties properties{};
+    properties_of(device, &properties);
+    if (properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
+      chosen = device;
+      break;
+    }
+  }
+  state->graphics_device_instance = record->instance;
+  state->graphics_device = chosen;
+  *physical_device = chosen;
+  return XR_SUCCESS;
+}
+
+// Like xrCreateVulkanInstanceKHR: the VkResult goes to *vulkan_result.
+XrResult xrCreateVulkanDeviceKHR(XrInstance instance, const XrVulkanDeviceCreateInfoKHR* info, VkDevice* vulkan_device,
+                                 VkResult* vulkan_result) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  XrResult error = XR_SUCCESS;
+  InstanceState* state = vulkan_instance_state(reg, instance, error);
+  if (state == nullptr) return error;
+  if (info == nullptr || vulkan_device == nullptr || vulkan_result == nullptr ||
+      info->type != XR_TYPE_VULKAN_DEVICE_CREATE_INFO_KHR || info->createFlags != 0 ||
+      info->pfnGetInstanceProcAddr == nullptr || info->vulkanCreateInfo == nullptr) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (info->systemId != kSystemId) return XR_ERROR_SYSTEM_INVALID;
+  if (info->vulkanPhysicalDevice == VK_NULL_HANDLE || info->vulkanPhysicalDevice != state->graphics_device) {
+    if (log_calls()) warn("xrCreateVulkanDeviceKHR: the VkPhysicalDevice is not what xrGetVulkanGraphicsDevice2KHR returned");
+    return XR_ERROR_GRAPHICS_DEVICE_INVALID;
+  }
+  const VkInstance vk_instance = state->graphics_device_instance;
+  auto create =
+      reinterpret_cast<PFN_vkCreateDevice>(info->pfnGetInstanceProcAddr(vk_instance, "vkCreateDevice"));
+  if (create == nullptr) {
+    warn("xrCreateVulkanDeviceKHR: pfnGetInstanceProcAddr has no vkCreateDevice");
+    return XR_ERROR_RUNTIME_FAILURE;
+  }
+  const VkDeviceCreateInfo& create_info = *info->vulkanCreateInfo;
+  *vulkan_result = create(info->vulkanPhysicalDevice, &create_info, info->vulkanAllocator, vulkan_device);
+  if (*vulkan_result == VK_SUCCESS) {
+    VulkanDeviceRecord record{*vulkan_device, vk_instance, info->vulkanPhysicalDevice, {}};
+    for (uint32_t i = 0; i < create_info.queueCreateInfoCount && create_info.pQueueCreateInfos != nullptr; ++i) {
+      const VkDeviceQueueCreateInfo& queue = create_info.pQueueCreateInfos[i];
+      record.queues.emplace_back(queue.queueFamilyIndex, queue.queueCount);
+    }
+    state->vulkan_devices.push_back(std::move(record));
+  }
+  return XR_SUCCESS;
 }
 
 // ---- XR_KHR_convert_timespec_time ----
@@ -896,11 +1936,26 @@ const std::vector<Function>& functions() {
       PROPRIO_MOCK_FUNCTION(xrEndFrame, Ext::none),
       PROPRIO_MOCK_FUNCTION(xrStringToPath, Ext::none),
       PROPRIO_MOCK_FUNCTION(xrPathToString, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrEnumerateViewConfigurations, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetViewConfigurationProperties, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrEnumerateViewConfigurationViews, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrLocateViews, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrEnumerateSwapchainFormats, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrCreateSwapchain, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrDestroySwapchain, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrEnumerateSwapchainImages, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrAcquireSwapchainImage, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrWaitSwapchainImage, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrReleaseSwapchainImage, Ext::none),
       PROPRIO_MOCK_FUNCTION(xrConvertTimespecTimeToTimeKHR, Ext::convert_timespec_time),
       PROPRIO_MOCK_FUNCTION(xrConvertTimeToTimespecTimeKHR, Ext::convert_timespec_time),
       PROPRIO_MOCK_FUNCTION(xrCreateHandTrackerEXT, Ext::hand_tracking),
       PROPRIO_MOCK_FUNCTION(xrDestroyHandTrackerEXT, Ext::hand_tracking),
       PROPRIO_MOCK_FUNCTION(xrLocateHandJointsEXT, Ext::hand_tracking),
+      PROPRIO_MOCK_FUNCTION(xrGetVulkanGraphicsRequirements2KHR, Ext::vulkan_enable2),
+      PROPRIO_MOCK_FUNCTION(xrCreateVulkanInstanceKHR, Ext::vulkan_enable2),
+      PROPRIO_MOCK_FUNCTION(xrGetVulkanGraphicsDevice2KHR, Ext::vulkan_enable2),
+      PROPRIO_MOCK_FUNCTION(xrCreateVulkanDeviceKHR, Ext::vulkan_enable2),
   };
   return table;
 }

@@ -2,8 +2,12 @@
 // loader (XR_RUNTIME_JSON), and once more under Debian's core_validation layer.
 // They also pin down mock_motion.hpp, which layer tests use for expectations.
 #include "mock_motion.hpp"
+#include "test_support.hpp"
 
 #include <proprio/openxr_layer/loader_interfaces.hpp>
+
+// Vulkan's headers only (VK_NO_PROTOTYPES): the structures of XR_KHR_vulkan_enable2.
+#include <vulkan/vulkan.h>
 
 #include <openxr/openxr.h>
 #include <openxr/openxr_platform.h>
@@ -31,32 +35,7 @@
 
 namespace {
 namespace mx = proprio::mock_xr;
-
-// Sets (or unsets, with nullptr) an environment variable for one scope.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const char* value) : name_(name) {
-    if (const char* old = std::getenv(name)) old_ = old;
-    if (value != nullptr) {
-      setenv(name, value, 1);
-    } else {
-      unsetenv(name);
-    }
-  }
-  ~ScopedEnv() {
-    if (old_) {
-      setenv(name_.c_str(), old_->c_str(), 1);
-    } else {
-      unsetenv(name_.c_str());
-    }
-  }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-
- private:
-  std::string name_;
-  std::optional<std::string> old_;
-};
+using namespace proprio::mock_xr::test;  // NOLINT(google-build-using-namespace): test helpers
 
 // Every test runs against the mock runtime, with no layer unless it asks.
 class MockRuntime : public ::testing::Test {
@@ -65,66 +44,6 @@ class MockRuntime : public ::testing::Test {
   ScopedEnv layers_{"XR_ENABLE_API_LAYERS", nullptr};
   ScopedEnv hand_tracking_{"PROPRIO_MOCK_RUNTIME_HAND_TRACKING", nullptr};
 };
-
-// A zeroed OpenXR structure of the given type (GCC's -Wextra flags `T{type}`).
-template <class T>
-T make(XrStructureType type) {
-  T value{};
-  value.type = type;
-  return value;
-}
-
-template <class Handle>
-Handle to_handle(uint64_t id) {
-  return reinterpret_cast<Handle>(static_cast<std::uintptr_t>(id));
-}
-
-XrResult create_instance(std::vector<const char*> extensions, XrInstance* instance) {
-  auto info = make<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
-  std::snprintf(info.applicationInfo.applicationName, XR_MAX_APPLICATION_NAME_SIZE, "mock_runtime_tests");
-  info.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
-  info.enabledExtensionCount = static_cast<uint32_t>(extensions.size());
-  info.enabledExtensionNames = extensions.data();
-  return xrCreateInstance(&info, instance);
-}
-
-std::vector<std::string> instance_extensions() {
-  uint32_t count = 0;
-  EXPECT_EQ(xrEnumerateInstanceExtensionProperties(nullptr, 0, &count, nullptr), XR_SUCCESS);
-  std::vector props(count, make<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
-  EXPECT_EQ(xrEnumerateInstanceExtensionProperties(nullptr, count, &count, props.data()), XR_SUCCESS);
-  std::vector<std::string> names;
-  for (const auto& p : props) names.emplace_back(p.extensionName);
-  return names;
-}
-
-template <class Pfn>
-Pfn get_proc(XrInstance instance, const char* name) {
-  PFN_xrVoidFunction f = nullptr;
-  EXPECT_EQ(xrGetInstanceProcAddr(instance, name, &f), XR_SUCCESS) << name;
-  return reinterpret_cast<Pfn>(f);
-}
-
-std::vector<XrSessionState> drain_states(XrInstance instance) {
-  std::vector<XrSessionState> states;
-  auto event = make<XrEventDataBuffer>(XR_TYPE_EVENT_DATA_BUFFER);
-  while (xrPollEvent(instance, &event) == XR_SUCCESS) {
-    if (event.type == XR_TYPE_EVENT_DATA_SESSION_STATE_CHANGED) {
-      states.push_back(reinterpret_cast<const XrEventDataSessionStateChanged&>(event).state);
-    }
-    event = make<XrEventDataBuffer>(XR_TYPE_EVENT_DATA_BUFFER);
-  }
-  return states;
-}
-
-XrSpace create_space(XrSession session, XrReferenceSpaceType type, XrPosef offset = mx::kIdentityPose) {
-  auto info = make<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
-  info.referenceSpaceType = type;
-  info.poseInReferenceSpace = offset;
-  XrSpace space = XR_NULL_HANDLE;
-  EXPECT_EQ(xrCreateReferenceSpace(session, &info, &space), XR_SUCCESS);
-  return space;
-}
 
 void expect_near(const XrVector3f& a, const XrVector3f& b, float tol = 1e-5f) {
   EXPECT_NEAR(a.x, b.x, tol);
@@ -421,6 +340,208 @@ TEST_F(MockRuntime, ConcurrentCallsFromEightThreads) {
   }
   for (auto& thread : threads) thread.join();
   EXPECT_EQ(failures.load(), 0);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+TEST_F(MockRuntime, PrimaryStereoViews) {
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  const XrSystemId system = get_hmd(instance);
+
+  uint32_t count = 0;
+  XrViewConfigurationType types[2]{};
+  ASSERT_EQ(xrEnumerateViewConfigurations(instance, system, 2, &count, types), XR_SUCCESS);
+  ASSERT_EQ(count, 1u);
+  EXPECT_EQ(types[0], XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO);
+  auto properties = make<XrViewConfigurationProperties>(XR_TYPE_VIEW_CONFIGURATION_PROPERTIES);
+  ASSERT_EQ(xrGetViewConfigurationProperties(instance, system, types[0], &properties), XR_SUCCESS);
+  EXPECT_EQ(properties.viewConfigurationType, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO);
+  EXPECT_FALSE(properties.fovMutable);
+  EXPECT_EQ(xrGetViewConfigurationProperties(instance, system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_MONO, &properties),
+            XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED);
+
+  auto views_of = [&] {
+    std::vector views(2, make<XrViewConfigurationView>(XR_TYPE_VIEW_CONFIGURATION_VIEW));
+    uint32_t n = 0;
+    EXPECT_EQ(xrEnumerateViewConfigurationViews(instance, system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 0, &n,
+                                                nullptr),
+              XR_SUCCESS);
+    EXPECT_EQ(n, 2u);
+    EXPECT_EQ(xrEnumerateViewConfigurationViews(instance, system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 2, &n,
+                                                views.data()),
+              XR_SUCCESS);
+    return views;
+  };
+  for (const auto& view : views_of()) {
+    EXPECT_EQ(view.recommendedImageRectWidth, 640u);
+    EXPECT_EQ(view.recommendedImageRectHeight, 360u);
+    EXPECT_EQ(view.maxImageRectWidth, 4096u);
+    EXPECT_EQ(view.maxImageRectHeight, 4096u);
+    EXPECT_EQ(view.recommendedSwapchainSampleCount, 1u);
+    EXPECT_EQ(view.maxSwapchainSampleCount, 1u);
+  }
+  {
+    ScopedEnv size("PROPRIO_MOCK_RUNTIME_VIEW_SIZE", "800x600");
+    EXPECT_EQ(views_of()[1].recommendedImageRectWidth, 800u);
+    EXPECT_EQ(views_of()[1].recommendedImageRectHeight, 600u);
+  }
+  {
+    ScopedEnv size("PROPRIO_MOCK_RUNTIME_VIEW_SIZE", "5000x10");  // too large: the default, with a warning
+    EXPECT_EQ(views_of()[0].recommendedImageRectWidth, 640u);
+  }
+
+  // xrLocateViews: the VIEW pose moved -/+ 31.5 mm along its own x axis.
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = system;
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  const XrSpace stage = create_space(session, XR_REFERENCE_SPACE_TYPE_STAGE);
+  auto locate_info = make<XrViewLocateInfo>(XR_TYPE_VIEW_LOCATE_INFO);
+  locate_info.viewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+  locate_info.displayTime = XrTime{123'456'789'012};
+  locate_info.space = stage;
+  auto view_state = make<XrViewState>(XR_TYPE_VIEW_STATE);
+  std::vector views(2, make<XrView>(XR_TYPE_VIEW));
+  ASSERT_EQ(xrLocateViews(session, &locate_info, &view_state, 2, &count, views.data()), XR_SUCCESS);
+  ASSERT_EQ(count, 2u);
+  EXPECT_EQ(view_state.viewStateFlags, XrViewStateFlags{0xF});
+  for (uint32_t i = 0; i < 2; ++i) {
+    XrPosef eye = mx::kIdentityPose;
+    eye.position.x = i == 0 ? -0.0315f : 0.0315f;
+    const mx::Located expected = mx::locate(XR_REFERENCE_SPACE_TYPE_VIEW, eye, XR_REFERENCE_SPACE_TYPE_STAGE,
+                                            mx::kIdentityPose, locate_info.displayTime);
+    expect_near(views[i].pose, expected.pose);
+    EXPECT_FLOAT_EQ(views[i].fov.angleLeft, -0.785f);
+    EXPECT_FLOAT_EQ(views[i].fov.angleRight, 0.785f);
+    EXPECT_FLOAT_EQ(views[i].fov.angleUp, 0.6f);
+    EXPECT_FLOAT_EQ(views[i].fov.angleDown, -0.6f);
+  }
+  const mx::Located head = mx::locate(XR_REFERENCE_SPACE_TYPE_VIEW, XR_REFERENCE_SPACE_TYPE_STAGE,
+                                      locate_info.displayTime);
+  const XrVector3f& l = views[0].pose.position;
+  const XrVector3f& r = views[1].pose.position;
+  EXPECT_NEAR(std::hypot(r.x - l.x, r.y - l.y, r.z - l.z), 0.063f, 1e-5f);
+  expect_near(XrVector3f{(l.x + r.x) / 2, (l.y + r.y) / 2, (l.z + r.z) / 2}, head.pose.position);
+
+  views[1].type = XR_TYPE_SPACE_LOCATION;
+  EXPECT_EQ(xrLocateViews(session, &locate_info, &view_state, 2, &count, views.data()), XR_ERROR_VALIDATION_FAILURE);
+  EXPECT_EQ(xrLocateViews(session, &locate_info, &view_state, 1, &count, views.data()), XR_ERROR_SIZE_INSUFFICIENT);
+  locate_info.viewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_MONO;
+  EXPECT_EQ(xrLocateViews(session, &locate_info, &view_state, 0, &count, nullptr),
+            XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+// A headless session has no swapchain formats, so no swapchain and no layer.
+TEST_F(MockRuntime, HeadlessSessionHasNoSwapchains) {
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = get_hmd(instance);
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  uint32_t count = 99;
+  EXPECT_EQ(xrEnumerateSwapchainFormats(session, 0, &count, nullptr), XR_SUCCESS);
+  EXPECT_EQ(count, 0u);
+  auto info = make<XrSwapchainCreateInfo>(XR_TYPE_SWAPCHAIN_CREATE_INFO);
+  info.format = VK_FORMAT_R8G8B8A8_SRGB;
+  info.usageFlags = XR_SWAPCHAIN_USAGE_COLOR_ATTACHMENT_BIT;
+  info.sampleCount = info.faceCount = info.arraySize = info.mipCount = 1;
+  info.width = info.height = 16;
+  XrSwapchain swapchain = XR_NULL_HANDLE;
+  EXPECT_EQ(xrCreateSwapchain(session, &info, &swapchain), XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED);
+  EXPECT_EQ(xrDestroySwapchain(to_handle<XrSwapchain>(0xdead)), XR_ERROR_HANDLE_INVALID);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+// XR_KHR_vulkan_enable2 is always offered; its order rules and bindings are
+// checked before any Vulkan object is touched (vulkan_session_test.cpp runs a
+// whole session on lavapipe).
+TEST_F(MockRuntime, VulkanEnable2OfferedAndChecked) {
+  const auto extensions = instance_extensions();
+  ASSERT_NE(std::find(extensions.begin(), extensions.end(), XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME), extensions.end());
+
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  PFN_xrVoidFunction f = nullptr;
+  EXPECT_EQ(xrGetInstanceProcAddr(instance, "xrCreateVulkanInstanceKHR", &f), XR_ERROR_FUNCTION_UNSUPPORTED);
+  // Headless without vulkan_enable2 ignores nothing: a binding is refused.
+  auto binding = make<XrGraphicsBindingVulkan2KHR>(XR_TYPE_GRAPHICS_BINDING_VULKAN2_KHR);
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = get_hmd(instance);
+  session_info.next = &binding;
+  XrSession session = XR_NULL_HANDLE;
+  EXPECT_EQ(xrCreateSession(instance, &session_info, &session), XR_ERROR_GRAPHICS_DEVICE_INVALID);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+
+  ASSERT_EQ(create_instance({XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  session_info.systemId = get_hmd(instance);
+  EXPECT_EQ(xrCreateSession(instance, &session_info, &session), XR_ERROR_GRAPHICS_REQUIREMENTS_CALL_MISSING);
+  auto requirements_of =
+      get_proc<PFN_xrGetVulkanGraphicsRequirements2KHR>(instance, "xrGetVulkanGraphicsRequirements2KHR");
+  ASSERT_NE(requirements_of, nullptr);
+  auto requirements = make<XrGraphicsRequirementsVulkan2KHR>(XR_TYPE_GRAPHICS_REQUIREMENTS_VULKAN2_KHR);
+  EXPECT_EQ(requirements_of(instance, session_info.systemId + 1, &requirements), XR_ERROR_SYSTEM_INVALID);
+  ASSERT_EQ(requirements_of(instance, session_info.systemId, &requirements), XR_SUCCESS);
+  EXPECT_EQ(requirements.minApiVersionSupported, XR_MAKE_VERSION(1, 1, 0));
+  EXPECT_EQ(requirements.maxApiVersionSupported, XR_MAKE_VERSION(1, 3, 0));
+  // Null handles: not a VkInstance this runtime created.
+  EXPECT_EQ(xrCreateSession(instance, &session_info, &session), XR_ERROR_GRAPHICS_DEVICE_INVALID);
+  // No binding and no XR_MND_headless: no session either.
+  session_info.next = nullptr;
+  EXPECT_EQ(xrCreateSession(instance, &session_info, &session), XR_ERROR_GRAPHICS_DEVICE_INVALID);
+
+  auto device_of = get_proc<PFN_xrGetVulkanGraphicsDevice2KHR>(instance, "xrGetVulkanGraphicsDevice2KHR");
+  ASSERT_NE(device_of, nullptr);
+  auto get_info = make<XrVulkanGraphicsDeviceGetInfoKHR>(XR_TYPE_VULKAN_GRAPHICS_DEVICE_GET_INFO_KHR);
+  get_info.systemId = session_info.systemId;
+  VkPhysicalDevice physical_device = VK_NULL_HANDLE;
+  EXPECT_EQ(device_of(instance, &get_info, &physical_device), XR_ERROR_VALIDATION_FAILURE);  // unknown VkInstance
+  auto create_instance_vk = get_proc<PFN_xrCreateVulkanInstanceKHR>(instance, "xrCreateVulkanInstanceKHR");
+  ASSERT_NE(create_instance_vk, nullptr);
+  auto vk_info = make<XrVulkanInstanceCreateInfoKHR>(XR_TYPE_VULKAN_INSTANCE_CREATE_INFO_KHR);
+  vk_info.systemId = session_info.systemId;
+  VkInstance vk_instance = VK_NULL_HANDLE;
+  VkResult vk_result = VK_SUCCESS;
+  EXPECT_EQ(create_instance_vk(instance, &vk_info, &vk_instance, &vk_result), XR_ERROR_VALIDATION_FAILURE);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+// PROPRIO_MOCK_RUNTIME_EXIT_AFTER_FRAMES=N: the runtime asks to exit after N
+// frames, so a plain frame loop ends by itself.
+TEST_F(MockRuntime, ExitsAfterFrames) {
+  ScopedEnv exit_after("PROPRIO_MOCK_RUNTIME_EXIT_AFTER_FRAMES", "3");
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = get_hmd(instance);
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_IDLE, XR_SESSION_STATE_READY}));
+  auto begin_info = make<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
+  begin_info.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+  ASSERT_EQ(xrBeginSession(session, &begin_info), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance),
+            (std::vector{XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_VISIBLE, XR_SESSION_STATE_FOCUSED}));
+  int frames = 0;
+  std::vector<XrSessionState> states;
+  while (states.empty() && frames < 10) {
+    auto frame_state = make<XrFrameState>(XR_TYPE_FRAME_STATE);
+    ASSERT_EQ(xrWaitFrame(session, nullptr, &frame_state), XR_SUCCESS);
+    ASSERT_EQ(xrBeginFrame(session, nullptr), XR_SUCCESS);
+    auto end_info = make<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+    end_info.displayTime = frame_state.predictedDisplayTime;
+    end_info.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+    ASSERT_EQ(xrEndFrame(session, &end_info), XR_SUCCESS);
+    ++frames;
+    states = drain_states(instance);
+  }
+  EXPECT_EQ(frames, 3);
+  EXPECT_EQ(states,
+            (std::vector{XR_SESSION_STATE_VISIBLE, XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_STOPPING}));
+  ASSERT_EQ(xrEndSession(session), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_IDLE, XR_SESSION_STATE_EXITING}));
+  EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
   EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
 }
 

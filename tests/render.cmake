@@ -44,3 +44,14 @@ if(PROPRIO_BUILD_TESTS AND PROPRIO_BUILD_BENCHMARKS AND TARGET proprio_bench AND
   target_sources(proprio_bench PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/bench/bench_render.cpp)
   target_link_libraries(proprio_bench PRIVATE proprio::render)
 endif()
+
+if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine AND TARGET proprio_mock_openxr_runtime)
+  proprio_add_test(engine_xr_tests
+    LABEL render
+    SOURCES render/test_engine_xr.cpp
+    DEPS proprio::engine)
+  target_compile_definitions(engine_xr_tests PRIVATE
+    PROPRIO_MOCK_RUNTIME_JSON="${PROPRIO_MOCK_RUNTIME_JSON}"
+    PROPRIO_XR_CAPTURE_DIR="${CMAKE_CURRENT_BINARY_DIR}/golden_out/xr_captures")
+  add_dependencies(engine_xr_tests proprio_mock_openxr_runtime)
+endif()

@@ -70,7 +70,7 @@ int run(const RunArgs& a) {
   o.out_dir = a.out;
   o.camera = a.camera == "orbit" ? engine::HeadlessCamera::orbit : engine::HeadlessCamera::head;
   o.software_renderer = a.software;
-  o.validation = a.validation;
+  o.validation = o.validation || a.validation;  // debug builds validate anyway
   o.hud = !a.no_hud;
   o.hand = *parse_handedness(a.hand);
 
@@ -193,7 +193,7 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--sim-subject", a->sim_subject, "--hands sim: simulated subject")->capture_default_str();
   cmd->add_option("--seed", a->seed, "--hands sim: motion seed")->capture_default_str();
   cmd->add_flag("--software", a->software, "force Mesa's lavapipe (CPU) renderer");
-  cmd->add_flag("--validation", a->validation, "Vulkan validation layer (fails the run on any validation error)");
+  cmd->add_flag("--validation", a->validation, "Vulkan validation layer, on by default in debug builds (fails the run on any validation error)");
   cmd->add_flag("--realtime", a->realtime, "headless: run on the wall clock instead of simulated time");
   cmd->add_flag("--no-hud", a->no_hud, "no text overlay");
   cmd->callback([a, &exit_code] { exit_code = run(*a); });

@@ -48,7 +48,11 @@ struct AppOptions {
   std::filesystem::path out_dir;  // headless PNGs (frame_0000.png, ...); empty: render without writing
   HeadlessCamera camera = HeadlessCamera::head;
   bool software_renderer = false;  // force lavapipe
-  bool validation = false;         // Vulkan validation layer
+#ifdef NDEBUG
+  bool validation = false;  // Vulkan validation layer (when installed); debug builds turn it on
+#else
+  bool validation = true;
+#endif
   Handedness hand = Handedness::right;  // the hand that drives the haptic proxy
   bool show_tracked_hand = true;   // the tracked hand as a translucent ghost when a proxy is shown
   bool hud = true;

@@ -149,7 +149,7 @@ TEST(Psi, ConvergesOnAKnownThresholdAndSlope) {
   s.stimuli = spaced(0.5, 15.0, 30, true);
   s.max_trials = 80;
   double sum = 0.0;
-  const int runs = 20;
+  const int runs = 12;
   for (int r = 0; r < runs; ++r) {
     Psi p(s);
     Rng unused(0);

@@ -32,6 +32,7 @@ double xlogy_ratio(double k, double expected) { return k > 0.0 ? k * std::log(k 
 struct Parameterisation {
   FitOptions options;
   double log_beta_min = 0.0, log_beta_max = 0.0;  // search box for log(beta)
+  double u_alpha_min = 0.0, u_alpha_max = 0.0;    // search box for alpha's coordinate
 
   std::size_t dimensions() const { return options.lapse_free ? 3 : 2; }
 
@@ -86,10 +87,15 @@ Result<PsychometricFit> polish(const std::vector<StimulusLevel>& data, const Par
   const PsychometricModel model = param.options.model;
   auto objective = [&](const std::vector<double>& u) {
     if (u[1] < param.log_beta_min || u[1] > param.log_beta_max) return kInf;
+    if (u[0] < param.u_alpha_min || u[0] > param.u_alpha_max) return kInf;
     return -log_likelihood(model, param.to_params(u), data);
   };
   detail::NelderMeadOptions nm;
-  const detail::NelderMeadResult r = detail::nelder_mead(objective, param.to_search(start), nm);
+  // A start outside the search box (a caller's guess) is moved inside it.
+  std::vector<double> u0 = param.to_search(start);
+  u0[0] = std::clamp(u0[0], param.u_alpha_min, param.u_alpha_max);
+  u0[1] = std::clamp(u0[1], param.log_beta_min, param.log_beta_max);
+  const detail::NelderMeadResult r = detail::nelder_mead(objective, u0, nm);
   if (!std::isfinite(r.f)) {
     return make_error(Errc::invalid_argument, "the likelihood is not finite anywhere the search looked; check the data");
   }
@@ -109,16 +115,22 @@ Parameterisation make_parameterisation(const std::vector<StimulusLevel>& data, c
     lo = std::min(lo, s.level);
     hi = std::max(hi, s.level);
   }
-  // beta is dimensionless for the Weibull and in 1/stimulus units otherwise;
-  // the box is generous (a factor of 1000 beyond the grid both ways) and only
-  // stops a separable data set from sending beta to infinity.
+  // beta is dimensionless for the Weibull and in 1/stimulus units otherwise.
+  // The box is generous (beta 100 times beyond the grid both ways, alpha up to
+  // 100 times the tested range away) and only stops small or separable data
+  // sets (and their bootstrap replicas) from running off to infinity, where
+  // the threshold means nothing anyway.
+  const double span = std::max(hi - lo, 1e-12);
   if (options.model == PsychometricModel::weibull) {
-    param.log_beta_min = std::log(0.5e-3);
-    param.log_beta_max = std::log(20e3);
+    param.log_beta_min = std::log(0.5e-2);
+    param.log_beta_max = std::log(20e2);
+    param.u_alpha_min = std::log(lo / 100.0);
+    param.u_alpha_max = std::log(hi * 100.0);
   } else {
-    const double span = std::max(hi - lo, 1e-12);
-    param.log_beta_min = std::log(0.5e-3 / span);
-    param.log_beta_max = std::log(200e3 / span);
+    param.log_beta_min = std::log(0.5e-2 / span);
+    param.log_beta_max = std::log(200e2 / span);
+    param.u_alpha_min = lo - 100.0 * span;
+    param.u_alpha_max = hi + 100.0 * span;
   }
   return param;
 }
@@ -387,6 +399,7 @@ Result<GoodnessOfFit> goodness_of_fit(const std::vector<StimulusLevel>& raw, con
 }
 
 double quantile_sorted(const std::vector<double>& sorted, double q) {
+  if (std::isnan(q) || sorted.empty()) return kNaN;
   const double h = (static_cast<double>(sorted.size()) - 1.0) * std::clamp(q, 0.0, 1.0);
   const auto lo = static_cast<std::size_t>(std::floor(h));
   const std::size_t hi = std::min(lo + 1, sorted.size() - 1);

@@ -41,7 +41,7 @@ std::string errno_text() { return std::strerror(errno); }
 // the stimulus it regenerates with the one on disk exactly.
 std::string format_number(double v) { return fmt::format("{}", v); }
 
-Status write_all(int fd, const std::string& text, const std::filesystem::path& path) {
+Status write_all(int fd, const std::string& text, const std::filesystem::path& path, bool sync = true) {
   std::size_t done = 0;
   while (done < text.size()) {
     const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
@@ -52,7 +52,7 @@ Status write_all(int fd, const std::string& text, const std::filesystem::path& p
     }
     done += static_cast<std::size_t>(n);
   }
-  if (::fsync(fd) != 0) {
+  if (sync && ::fsync(fd) != 0) {
     return make_error(Errc::io_error, fmt::format("fsync of {} failed: {}", path.string(), errno_text()));
   }
   return Status::success();
@@ -417,6 +417,7 @@ Result<Session> Session::open(const StudyDesign& design, const SessionOptions& o
   }
   j["analysis"] = analysis;
   j["planned_trials"] = s.plan.size();
+  j["sync_each_trial"] = options.sync_each_trial;
   j["started_unix_ns"] = unix_ns();
   j["resumes"] = json::array();
   j["completed_trials"] = 0;
@@ -464,7 +465,9 @@ Status Session::record(const Trial& trial, const Response& response) {
   }
   // Written from the pending trial, not the caller's copy, so the row always
   // matches what the plan and procedures hold.
-  if (Status w = write_all(s.fd, s.row_for(*s.pending, response), s.csv_path); !w) return w;
+  if (Status w = write_all(s.fd, s.row_for(*s.pending, response), s.csv_path, s.options.sync_each_trial); !w) {
+    return w;
+  }
   s.apply(response.correct);
   if (!s.prepare_next()) return s.update_sidecar();
   return Status::success();

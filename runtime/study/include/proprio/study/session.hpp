@@ -42,6 +42,10 @@ struct SessionOptions {
   std::string device_json;
   std::string calibration_json;
   std::string software_version;    // empty: this library's version
+  // fsync every row (and the sidecar) before record() returns. Turn it off
+  // only for simulated participants: it saves a few ms of disk flush per
+  // trial, and a crash then may lose rows the OS had not written yet.
+  bool sync_each_trial = true;
 };
 
 struct Trial {

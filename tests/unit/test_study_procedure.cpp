@@ -138,32 +138,6 @@ TEST(Quest, ConvergesOnAKnownThreshold) {
   EXPECT_GE(within_2sd, runs * 85 / 100);
 }
 
-TEST(Psi, ConvergesOnAKnownThresholdAndSlope) {
-  SimulatedObserver obs;
-  obs.params = {5.0, 3.0, 0.5, 0.02};
-  const double truth = obs.threshold(0.75);
-  PsiSettings s;
-  s.alphas = spaced(1.0, 12.0, 40, true);
-  s.betas = spaced(1.0, 8.0, 12, true);
-  s.lapses = {0.0, 0.02, 0.04};
-  s.stimuli = spaced(0.5, 15.0, 30, true);
-  s.max_trials = 80;
-  double sum = 0.0;
-  const int runs = 12;
-  for (int r = 0; r < runs; ++r) {
-    Psi p(s);
-    Rng unused(0);
-    obs.seed = mix_seed(11, static_cast<std::uint64_t>(r));
-    for (int t = 0; !p.finished(); ++t) {
-      const StimulusRequest req = p.next(unused);
-      p.record(req, obs.respond(req.stimulus, static_cast<std::uint64_t>(t)));
-    }
-    sum += p.estimate().threshold;
-  }
-  std::printf("Psi: mean 75%% threshold %.3f (truth %.3f)\n", sum / runs, truth);
-  EXPECT_NEAR(sum / runs, truth, 0.08 * truth);
-}
-
 TEST(Interleaved, AlternatesRandomlyAndReplaysTheSameChoices) {
   StaircaseSettings a;
   a.start = 8.0;

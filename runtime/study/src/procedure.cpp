@@ -313,12 +313,16 @@ PsychometricParams Psi::posterior_mean() const {
 }
 
 ProcedureEstimate Psi::estimate() const {
+  // The threshold of the posterior-mean parameters (Kontsevich & Tyler's
+  // estimate). The posterior mean of each cell's threshold was tried too: with
+  // the log-spaced alpha grid acting as a log-uniform prior it came out 2-3%
+  // low on simulated observers, against < 1% for this one.
   const PsychometricParams m = posterior_mean();
   ProcedureEstimate e;
   e.trials = trials_;
   const Result<double> t = threshold_at(settings_.model, m, settings_.target);
   e.threshold = t ? *t : kNaN;
-  // SD of alpha (the location) as the uncertainty.
+  // Uncertainty: the posterior SD of alpha, the location.
   double v = 0.0;
   std::size_t c = 0;
   for (double alpha : settings_.alphas) {

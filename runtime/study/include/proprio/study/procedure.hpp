@@ -143,7 +143,7 @@ class Psi final : public Procedure {
   bool finished() const override;
   ProcedureEstimate estimate() const override;
   std::unique_ptr<Procedure> clone() const override { return std::make_unique<Psi>(*this); }
-  // Posterior means of the parameters.
+  // Posterior means of the parameters (estimate() reports the posterior mean threshold).
   PsychometricParams posterior_mean() const;
 
  private:

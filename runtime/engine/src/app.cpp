@@ -175,6 +175,7 @@ AppReport App::Impl::report(OutputMode mode, const std::string& device, int fram
 }
 
 Result<AppReport> App::Impl::run_headless() {
+  const HapticsOffOnExit haptics_off{*this};
   render::ContextOptions co;
   co.device = options.software_renderer ? render::DevicePreference::software : render::DevicePreference::automatic;
   co.validation = options.validation;
@@ -234,7 +235,6 @@ Result<AppReport> App::Impl::run_headless() {
     }
     const auto t0 = std::chrono::steady_clock::now();
     if (auto s = (*renderer)->render(draws, std::span(views.data(), eyes), (*target)->views()); !s) {
-      shutdown_haptics();
       return s.error();
     }
     // Timed: rendering and read-back (what a frame costs), not PNG encoding.
@@ -244,7 +244,6 @@ Result<AppReport> App::Impl::run_headless() {
     sheet.pixels.resize(std::size_t{sheet.width} * sheet.height * 4);
     for (std::uint32_t e = 0; e < eyes && write; ++e) {
       if (auto s = (*target)->read(e, eye_image); !s) {
-        shutdown_haptics();
         return s.error();
       }
       for (std::uint32_t y = 0; y < options.height; ++y) {
@@ -253,7 +252,6 @@ Result<AppReport> App::Impl::run_headless() {
     }
     if (!write) {
       if (auto s = (*renderer)->wait_idle(); !s) {
-        shutdown_haptics();
         return s.error();
       }
     }
@@ -261,7 +259,6 @@ Result<AppReport> App::Impl::run_headless() {
     if (write) {
       const auto file = options.out_dir / fmt::format("frame_{:04d}.png", frame);
       if (auto s = render::write_png(sheet, file); !s) {
-        shutdown_haptics();
         return s.error();
       }
       result.images.push_back(file);
@@ -279,6 +276,7 @@ Result<AppReport> App::Impl::run_headless() {
 }
 
 Result<AppReport> App::Impl::run_window() {
+  const HapticsOffOnExit haptics_off{*this};
   auto window = render::Window::create("Proprio: " + scene.name, static_cast<int>(options.width),
                                        static_cast<int>(options.height));
   if (!window) return window.error();
@@ -331,7 +329,6 @@ Result<AppReport> App::Impl::run_window() {
                                           {0.8f, 0.8f, 0.8f, 1}, true});
     auto f = (*target)->acquire();
     if (!f) {
-      shutdown_haptics();
       return f.error();
     }
     const VkExtent2D extent = (*target)->extent();
@@ -340,11 +337,9 @@ Result<AppReport> App::Impl::run_window() {
                                                               static_cast<float>(std::max(1u, extent.height)))};
     const auto t0 = std::chrono::steady_clock::now();
     if (auto s = (*renderer)->render(draws, std::span(&view, 1), std::span(&f->target, 1), f->sync); !s) {
-      shutdown_haptics();
       return s.error();
     }
     if (auto s = (*target)->present(*f); !s) {
-      shutdown_haptics();
       return s.error();
     }
     render_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());

@@ -37,6 +37,13 @@ struct App::Impl {
   Result<AppReport> run_xr();
   AppReport report(OutputMode mode, const std::string& device, int frames) const;
   void shutdown_haptics();
+
+  // Every way out of a frame loop (errors included) stops haptic output;
+  // shutdown_haptics() is idempotent.
+  struct HapticsOffOnExit {
+    Impl& app;
+    ~HapticsOffOnExit() { app.shutdown_haptics(); }
+  };
 };
 
 

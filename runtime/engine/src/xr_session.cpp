@@ -99,6 +99,7 @@ bool xr_runtime_available() {
 }
 
 Result<AppReport> App::Impl::run_xr() {
+  const HapticsOffOnExit haptics_off{*this};
   const auto exts = runtime_extensions();
   if (exts.empty()) {
     return make_error(Errc::unavailable, "no OpenXR runtime (set XR_RUNTIME_JSON or install one, e.g. Monado)");
@@ -340,7 +341,6 @@ Result<AppReport> App::Impl::run_xr() {
           XrSessionBeginInfo bi{XR_TYPE_SESSION_BEGIN_INFO};
           bi.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
           if (XrResult r = xrBeginSession(xr.session, &bi); XR_FAILED(r)) {
-            shutdown_haptics();
             return xr_error(xr.instance, "xrBeginSession", r);
           }
           running = true;
@@ -371,11 +371,9 @@ Result<AppReport> App::Impl::run_xr() {
 
     XrFrameState fs{XR_TYPE_FRAME_STATE};
     if (XrResult r = xrWaitFrame(xr.session, nullptr, &fs); XR_FAILED(r)) {
-      shutdown_haptics();
       return xr_error(xr.instance, "xrWaitFrame", r);
     }
     if (XrResult r = xrBeginFrame(xr.session, nullptr); XR_FAILED(r)) {
-      shutdown_haptics();
       return xr_error(xr.instance, "xrBeginFrame", r);
     }
     const TimeNs t = xr_to_monotonic(fs.predictedDisplayTime);
@@ -429,11 +427,9 @@ Result<AppReport> App::Impl::run_xr() {
         XrSwapchainImageWaitInfo wi{XR_TYPE_SWAPCHAIN_IMAGE_WAIT_INFO};
         wi.timeout = XR_INFINITE_DURATION;
         if (XrResult r = xrAcquireSwapchainImage(xr.swapchains[e], nullptr, &index); XR_FAILED(r)) {
-          shutdown_haptics();
           return xr_error(xr.instance, "xrAcquireSwapchainImage", r);
         }
         if (XrResult r = xrWaitSwapchainImage(xr.swapchains[e], &wi); XR_FAILED(r)) {
-          shutdown_haptics();
           return xr_error(xr.instance, "xrWaitSwapchainImage", r);
         }
         views[e] = {from_xr(xr_views[e].pose), {xr_views[e].fov.angleLeft, xr_views[e].fov.angleRight,
@@ -453,7 +449,6 @@ Result<AppReport> App::Impl::run_xr() {
         xrReleaseSwapchainImage(xr.swapchains[e], &ri);
       }
       if (!s) {
-        shutdown_haptics();
         return s.error();
       }
       render_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
@@ -468,7 +463,6 @@ Result<AppReport> App::Impl::run_xr() {
     fe.layerCount = rendered ? 1 : 0;
     fe.layers = rendered ? layers : nullptr;
     if (XrResult r = xrEndFrame(xr.session, &fe); XR_FAILED(r)) {
-      shutdown_haptics();
       return xr_error(xr.instance, "xrEndFrame", r);
     }
     ++frame;

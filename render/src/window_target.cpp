@@ -27,6 +27,8 @@ Result<std::unique_ptr<Window>> Window::create(const std::string& title, int wid
     return make_error(Errc::unavailable, "GLFW could not create a window");
   }
   glfwGetCursorPos(w->window_, &w->last_x_, &w->last_y_);
+  glfwSetWindowUserPointer(w->window_, w.get());
+  glfwSetKeyCallback(w->window_, &Window::on_key);
   return w;
 }
 
@@ -44,9 +46,29 @@ std::vector<std::string> Window::required_instance_extensions() const {
 bool Window::should_close() const { return glfwWindowShouldClose(window_) != 0; }
 void Window::request_close() { glfwSetWindowShouldClose(window_, GLFW_TRUE); }
 
+void Window::on_key(GLFWwindow* window, int key, int /*scancode*/, int action, int /*mods*/) {
+  if (action != GLFW_PRESS) return;
+  auto* self = static_cast<Window*>(glfwGetWindowUserPointer(window));
+  std::string name;
+  if (key >= GLFW_KEY_A && key <= GLFW_KEY_Z) name = std::string(1, static_cast<char>('a' + (key - GLFW_KEY_A)));
+  if (key >= GLFW_KEY_0 && key <= GLFW_KEY_9) name = std::string(1, static_cast<char>('0' + (key - GLFW_KEY_0)));
+  switch (key) {
+    case GLFW_KEY_SPACE: name = "space"; break;
+    case GLFW_KEY_ENTER: name = "enter"; break;
+    case GLFW_KEY_LEFT: name = "left"; break;
+    case GLFW_KEY_RIGHT: name = "right"; break;
+    case GLFW_KEY_UP: name = "up"; break;
+    case GLFW_KEY_DOWN: name = "down"; break;
+    case GLFW_KEY_BACKSPACE: name = "backspace"; break;
+    default: break;
+  }
+  if (self && !name.empty()) self->pending_keys_.push_back(std::move(name));
+}
+
 WindowInput Window::poll() {
   glfwPollEvents();
   WindowInput in;
+  in.keys_pressed.swap(pending_keys_);
   auto key = [&](int k) { return glfwGetKey(window_, k) == GLFW_PRESS ? 1.0f : 0.0f; };
   in.move_forward = key(GLFW_KEY_W) - key(GLFW_KEY_S);
   in.move_right = key(GLFW_KEY_D) - key(GLFW_KEY_A);

@@ -78,5 +78,56 @@ TEST(EngineHeadless, WithoutHapticsTheTrackedHandIsDrawnAsIs) {
   EXPECT_EQ(run.report.peak_fingertip_force_n, 0.0);
 }
 
+TEST(EngineHeadless, FrameHookBlacksOutTheSceneDrawsMarkersAndStops) {
+  auto scene = Scene::preset("half-cylinder");
+  ASSERT_TRUE(scene);
+  AppOptions o;
+  o.output = OutputMode::headless;
+  o.width = 160;
+  o.height = 90;
+  o.stereo = false;
+  o.frames = 10;
+  o.software_renderer = true;
+  o.validation = true;
+  o.hud = false;
+  o.out_dir = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / "engine_hook";
+  std::filesystem::remove_all(o.out_dir);
+  AppInputs in;
+  int calls = 0;
+  Pose head_seen;
+  in.on_frame = [&](FrameContext& c) {
+    ++calls;
+    EXPECT_EQ(c.frame, calls - 1);
+    ASSERT_NE(c.tracked, nullptr);
+    EXPECT_TRUE(c.markers.empty());  // cleared before every call
+    EXPECT_EQ(c.entities.size(), 1u);
+    head_seen = c.T_world_head;
+    c.show_scene = c.frame != 1;  // frame 1: black, with a red sphere 30 cm ahead of the eyes
+    if (c.frame == 1) {
+      c.markers.push_back({FrameContext::Marker::Shape::sphere,
+                           Pose{Quat::Identity(), c.T_world_head * Vec3(0, 0, -0.3)}, Vec3::Constant(0.03),
+                           {1, 0, 0, 1}});
+    }
+    c.stop = c.frame == 2;
+  };
+  auto app = App::create(std::move(*scene), std::move(in), o);
+  ASSERT_TRUE(app) << app.error().message;
+  auto report = (*app)->run();
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(calls, 3);
+  EXPECT_EQ(report->frames, 3);
+  EXPECT_GT(head_seen.p.y(), 0.5);  // a standing viewer's eyes
+  auto black = render::read_png(report->images[1]);
+  ASSERT_TRUE(black);
+  const std::uint8_t* centre = black->at(80, 45);
+  EXPECT_GT(centre[0], 150);  // the red marker in the middle of the view
+  EXPECT_LT(centre[1], 60);
+  const std::uint8_t* corner = black->at(2, 2);
+  EXPECT_LT(corner[0] + corner[1] + corner[2], 10);  // everything else black
+  auto normal = render::read_png(report->images[0]);
+  ASSERT_TRUE(normal);
+  EXPECT_GT(normal->at(2, 2)[2], 10);  // the usual background
+}
+
 }  // namespace
 }  // namespace proprio::engine

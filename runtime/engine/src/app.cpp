@@ -129,12 +129,45 @@ void App::Impl::read_servo_snapshot() {
   hud_status = fmt::format("fingertip force {:.2f} N (gate {})", force, gate);
 }
 
-void App::Impl::compose(render::DrawList& draws, const SceneDrawer& drawer, double t_s) {
+void App::Impl::run_frame_hook(TimeNs t, int frame, const Pose& T_world_head, std::vector<std::string> keys) {
+  if (!inputs.on_frame) return;
+  FrameContext& c = frame_context;
+  c.time_ns = t;
+  c.frame = frame;
+  c.T_world_head = T_world_head;
+  c.tracked = &tracked;
+  c.proxy = &proxy;
+  c.servo = servo ? servo->latest() : nullptr;
+  c.keys = std::move(keys);
+  c.markers.clear();
+  c.prompt.clear();
+  inputs.on_frame(c);
+  if (c.stop) stop->store(true);
+}
+
+void App::Impl::compose(render::DrawList& draws, const SceneDrawer& drawer, double t_s, std::uint32_t width,
+                        std::uint32_t height) {
   draws.clear();
-  drawer.append_scene(draws, entity_poses);
-  const bool proxy_shown = servo && proxy.active;
-  if (proxy_shown) drawer.append_hand(draws, proxy, false);
-  if (tracked.active && (!proxy_shown || options.show_tracked_hand)) drawer.append_hand(draws, tracked, proxy_shown);
+  const FrameContext& c = frame_context;
+  draws.clear_color = c.show_scene ? glm::vec4(0.08f, 0.09f, 0.11f, 1.0f) : glm::vec4(0, 0, 0, 1);
+  if (c.show_scene) drawer.append_scene(draws, entity_poses, c.entities);
+  if (c.show_hands) {
+    const bool proxy_shown = servo && proxy.active;
+    if (proxy_shown) drawer.append_hand(draws, proxy, false);
+    if (tracked.active && (!proxy_shown || options.show_tracked_hand)) drawer.append_hand(draws, tracked, proxy_shown);
+  }
+  for (const auto& m : c.markers) drawer.append_marker(draws, m);
+  if (!c.prompt.empty()) {
+    // stb_easy_font glyphs are about 6 px wide at scale 1.
+    constexpr float scale = 3.0f;
+    std::size_t longest = 0, line = 0;
+    for (char ch : c.prompt) {
+      line = ch == '\n' ? 0 : line + 1;
+      longest = std::max(longest, line);
+    }
+    const float x = std::max(8.0f, 0.5f * static_cast<float>(width) - 3.0f * scale * static_cast<float>(longest));
+    draws.hud.push_back({c.prompt, {x, 0.35f * static_cast<float>(height)}, scale, {1, 1, 0.85f, 1}, true});
+  }
   if (options.hud) {
     draws.hud.push_back({fmt::format("Proprio  {}  t = {:.2f} s{}{}", scene.name, t_s, hud_status.empty() ? "" : "\n",
                                      hud_status),
@@ -226,12 +259,14 @@ Result<AppReport> App::Impl::run_headless() {
     previous = t;
     read_hands(t);
     read_servo_snapshot();
-    compose(draws, *drawer, static_cast<double>(t - start) * 1e-9);
+    const Pose T_world_head = head_pose(frame);
+    run_frame_hook(t, frame, T_world_head, {});
+    compose(draws, *drawer, static_cast<double>(t - start) * 1e-9, options.width, options.height);
     std::array<render::View, 2> views{};
     if (options.stereo) {
-      views = render::stereo_views(head_pose(frame), static_cast<float>(options.ipd_m), fov);
+      views = render::stereo_views(T_world_head, static_cast<float>(options.ipd_m), fov);
     } else {
-      views[0] = {head_pose(frame), fov};
+      views[0] = {T_world_head, fov};
     }
     const auto t0 = std::chrono::steady_clock::now();
     if (auto s = (*renderer)->render(draws, std::span(views.data(), eyes), (*target)->views()); !s) {
@@ -323,7 +358,9 @@ Result<AppReport> App::Impl::run_window() {
     if (inputs.before_frame) inputs.before_frame(t);
     read_hands(t);
     read_servo_snapshot();
-    compose(draws, *drawer, static_cast<double>(t - start) * 1e-9);
+    run_frame_hook(t, frame, camera, in.keys_pressed);
+    compose(draws, *drawer, static_cast<double>(t - start) * 1e-9, (*target)->extent().width,
+            (*target)->extent().height);
     if (options.hud) draws.hud.push_back({"drag: look   W/A/S/D/Q/E: move   shift: fast   Esc: quit",
                                           {16.0f, static_cast<float>((*target)->extent().height) - 40.0f}, 1.5f,
                                           {0.8f, 0.8f, 0.8f, 1}, true});
@@ -369,7 +406,10 @@ Result<std::unique_ptr<App>> App::create(Scene scene, AppInputs inputs, AppOptio
     if (!shape) return shape.error();
     impl->hand_model = std::make_shared<const HandModel>(*shape);
   }
-  for (const Entity& e : impl->scene.entities) impl->entity_poses.push_back(e.body.T_world_object);
+  for (const Entity& e : impl->scene.entities) {
+    impl->entity_poses.push_back(e.body.T_world_object);
+    impl->frame_context.entities.push_back({true, e.body.rgba});
+  }
   if (auto s = impl->build_servo(); !s) return s.error();
   return std::unique_ptr<App>(new App(std::move(impl)));
 }

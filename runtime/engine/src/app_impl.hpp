@@ -25,12 +25,17 @@ struct App::Impl {
   double peak_force_n = 0;
   std::vector<double> render_ms;
   TimeNs next_tick_ns = 0;  // simulated time: the servo's next tick
+  FrameContext frame_context;  // the frame hook's state (entity styles persist across frames)
 
   Status build_servo();
   void read_hands(TimeNs t);
   void step_haptics_to(TimeNs from, TimeNs to);
   void read_servo_snapshot();
-  void compose(render::DrawList& draws, const SceneDrawer& drawer, double t_s);
+  // Runs inputs.on_frame (when set) for this frame.
+  void run_frame_hook(TimeNs t, int frame, const Pose& T_world_head, std::vector<std::string> keys);
+  // `width`/`height`: the view's pixels, for centring the participant prompt.
+  void compose(render::DrawList& draws, const SceneDrawer& drawer, double t_s, std::uint32_t width,
+               std::uint32_t height);
   Pose head_pose(int frame) const;
   Result<AppReport> run_headless();
   Result<AppReport> run_window();

@@ -45,6 +45,11 @@ Result<SceneDrawer> SceneDrawer::create(render::Renderer& renderer, const Scene&
 }
 
 void SceneDrawer::append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity) const {
+  append_scene(draws, T_world_entity, {});
+}
+
+void SceneDrawer::append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity,
+                               const std::vector<FrameContext::EntityStyle>& styles) const {
   if (floor_height_m_) {
     const glm::mat4 floor = glm::scale(
         glm::translate(glm::mat4(1.0f), glm::vec3(0.0f, static_cast<float>(*floor_height_m_) - 0.005f, -0.5f)),
@@ -52,8 +57,33 @@ void SceneDrawer::append_scene(render::DrawList& draws, const std::vector<Pose>&
     draws.items.push_back({unit_.box, floor, {0.32f, 0.34f, 0.36f, 1.0f}});
   }
   for (std::size_t i = 0; i < meshes_.size() && i < T_world_entity.size(); ++i) {
-    draws.items.push_back({meshes_[i], to_glm(T_world_entity[i]), colors_[i]});
+    if (i < styles.size()) {
+      if (!styles[i].visible) continue;
+      const auto& c = styles[i].rgba;
+      draws.items.push_back({meshes_[i], to_glm(T_world_entity[i]), {c[0], c[1], c[2], c[3]}});
+    } else {
+      draws.items.push_back({meshes_[i], to_glm(T_world_entity[i]), colors_[i]});
+    }
   }
+}
+
+void SceneDrawer::append_marker(render::DrawList& draws, const FrameContext::Marker& m) const {
+  using Shape = FrameContext::Marker::Shape;
+  glm::vec3 scale;
+  render::MeshId mesh = unit_.sphere;
+  switch (m.shape) {
+    case Shape::sphere: scale = glm::vec3(static_cast<float>(m.size_m.x())); break;
+    case Shape::box:  // the unit box has half extents 0.5
+      mesh = unit_.box;
+      scale = 2.0f * to_glm(m.size_m);
+      break;
+    case Shape::cylinder:  // unit cylinder: radius 1, length 1
+      mesh = unit_.cylinder;
+      scale = glm::vec3(static_cast<float>(m.size_m.x()), static_cast<float>(m.size_m.x()),
+                        2.0f * static_cast<float>(m.size_m.z()));
+      break;
+  }
+  draws.items.push_back({mesh, glm::scale(to_glm(m.T_world_marker), scale), {m.rgba[0], m.rgba[1], m.rgba[2], m.rgba[3]}});
 }
 
 void SceneDrawer::append_hand(render::DrawList& draws, const HandPose& pose, bool ghost) const {

@@ -3,6 +3,7 @@
 // hands to a draw list each frame.
 #include <vector>
 
+#include "proprio/engine/app.hpp"
 #include "proprio/engine/scene.hpp"
 #include "proprio/render/hand_drawing.hpp"
 #include "proprio/render/renderer.hpp"
@@ -15,6 +16,10 @@ class SceneDrawer {
 
   // Entity i at `T_world_entity[i]` (the simulation moves free bodies).
   void append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity) const;
+  // The same with the frame hook's per-entity visibility and colours.
+  void append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity,
+                    const std::vector<FrameContext::EntityStyle>& styles) const;
+  void append_marker(render::DrawList& draws, const FrameContext::Marker& marker) const;
   void append_hand(render::DrawList& draws, const HandPose& pose, bool ghost) const;
 
  private:

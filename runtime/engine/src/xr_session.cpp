@@ -331,6 +331,7 @@ Result<AppReport> App::Impl::run_xr() {
   XrSessionState state = XR_SESSION_STATE_UNKNOWN;
   bool running = false, exit_requested = false, done = false;
   int frame = 0;
+  Pose head;  // the last located head; kept when a frame's views are not valid
   const TimeNs start = MonotonicClock::instance().now_ns();
   while (!done) {
     XrEventDataBuffer event{XR_TYPE_EVENT_DATA_BUFFER};
@@ -402,8 +403,6 @@ Result<AppReport> App::Impl::run_xr() {
       read_hands(t);
     }
     read_servo_snapshot();
-    compose(draws, *drawer, static_cast<double>(t - start) * 1e-9);
-
     std::array<XrView, 2> xr_views{{{XR_TYPE_VIEW}, {XR_TYPE_VIEW}}};
     XrViewLocateInfo vli{XR_TYPE_VIEW_LOCATE_INFO};
     vli.viewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
@@ -414,6 +413,13 @@ Result<AppReport> App::Impl::run_xr() {
     const bool views_ok = XR_SUCCEEDED(xrLocateViews(xr.session, &vli, &vs, 2, &located, xr_views.data())) &&
                           located == 2 && (vs.viewStateFlags & XR_VIEW_STATE_POSITION_VALID_BIT) &&
                           (vs.viewStateFlags & XR_VIEW_STATE_ORIENTATION_VALID_BIT);
+    // The head is between the eyes, looking where they look.
+    if (views_ok) {
+      head = {from_xr(xr_views[0].pose).q,
+              0.5 * (from_xr(xr_views[0].pose).p + from_xr(xr_views[1].pose).p)};
+    }
+    run_frame_hook(t, frame, head, {});
+    compose(draws, *drawer, static_cast<double>(t - start) * 1e-9, extents[0].width, extents[0].height);
     std::array<XrCompositionLayerProjectionView, 2> projection_views{
         {{XR_TYPE_COMPOSITION_LAYER_PROJECTION_VIEW}, {XR_TYPE_COMPOSITION_LAYER_PROJECTION_VIEW}}};
     XrCompositionLayerProjection layer{XR_TYPE_COMPOSITION_LAYER_PROJECTION};

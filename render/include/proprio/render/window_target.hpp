@@ -18,6 +18,9 @@ struct WindowInput {
   float move_forward = 0, move_right = 0, move_up = 0;  // -1, 0 or 1
   float look_dx_px = 0, look_dy_px = 0;
   bool fast = false;  // shift held
+  // Key presses in order (not repeats): "a".."z", "0".."9", "space", "enter",
+  // "left", "right", "up", "down", "backspace"; others are left out.
+  std::vector<std::string> keys_pressed;
 };
 
 class Window {
@@ -42,6 +45,8 @@ class Window {
   GLFWwindow* window_ = nullptr;
   double last_x_ = 0, last_y_ = 0;
   bool dragging_ = false;
+  std::vector<std::string> pending_keys_;  // filled by GLFW's key callback during glfwPollEvents
+  static void on_key(GLFWwindow* window, int key, int scancode, int action, int mods);
 };
 
 class WindowTarget {

@@ -14,6 +14,7 @@
 //
 // Shutdown always disengages the haptic gates and sends zero force, also on
 // errors and Ctrl-C (request_stop()).
+#include <array>
 #include <atomic>
 #include <filesystem>
 #include <functional>
@@ -60,6 +61,37 @@ struct AppOptions {
   Status validate() const;
 };
 
+// Per-frame app logic (a study's protocol) sees the frame's state and decides
+// what is shown. The outputs persist from frame to frame unless noted.
+struct FrameContext {
+  // In.
+  TimeNs time_ns = 0;
+  int frame = 0;
+  Pose T_world_head;                 // this frame's head (headless: the camera; window: the fly camera; XR: VIEW)
+  const HandPose* tracked = nullptr; // never null; may be inactive
+  const HandPose* proxy = nullptr;   // never null; inactive without haptics
+  const haptics::ServoSnapshot* servo = nullptr;  // the newest servo snapshot; null without haptics
+  std::vector<std::string> keys;     // keys pressed since the last frame: "a".."z", "0".."9", "space", "enter",
+                                     // "left", "right", "up", "down", "backspace" (window only)
+  // Out.
+  bool show_scene = true;   // entities and floor; false: a black background as well
+  bool show_hands = true;   // the tracked and proxy hands
+  struct EntityStyle {
+    bool visible = true;
+    std::array<float, 4> rgba{};  // starts as the scene's colour
+  };
+  std::vector<EntityStyle> entities;  // one per scene entity, in scene order
+  struct Marker {
+    enum class Shape { sphere, box, cylinder } shape = Shape::sphere;
+    Pose T_world_marker;
+    Vec3 size_m = Vec3::Constant(0.01);   // sphere: radius in x; box: half extents; cylinder: radius x, half length z
+    std::array<float, 4> rgba{1, 1, 1, 1};
+  };
+  std::vector<Marker> markers;         // cleared before every call
+  std::string prompt;                  // large centred text for the participant (cleared before every call)
+  bool stop = false;                   // end the run after this frame
+};
+
 // What the caller wires in. Everything is optional except a scene.
 struct AppInputs {
   std::shared_ptr<HandSource> hands;
@@ -73,6 +105,9 @@ struct AppInputs {
   // Called each frame before hands are read, with the frame's time (a
   // source without its own thread produces its sample here).
   std::function<void(TimeNs)> before_frame;
+  // Called each frame after the hands and the servo snapshot are read and
+  // before drawing.
+  std::function<void(FrameContext&)> on_frame;
 };
 
 struct AppReport {

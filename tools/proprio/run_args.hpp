@@ -1,0 +1,61 @@
+#pragma once
+// `proprio run`'s arguments and the engine wiring they describe, shared by the
+// plain scene runner (cmd_run.cpp) and the study samples it dispatches to
+// (`proprio run perception-threshold|peg-in-hole --participant ...`).
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "proprio/core/result.hpp"
+#include "proprio/engine/app.hpp"
+
+#ifndef PROPRIO_SOURCE_DIR
+#define PROPRIO_SOURCE_DIR "."
+#endif
+
+namespace proprio::cli {
+
+struct RunArgs {
+  std::string scene = "half-cylinder";
+  bool xr = false, window = false, headless = false;
+  std::vector<std::string> hands{"touch"};
+  std::string haptics = "sim";
+  std::string device = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml";
+  std::vector<std::string> fingers{"index"};
+  int frames = -1;
+  double fps = 30.0;
+  std::string out = "proprio-frames";
+  bool out_given = false;
+  std::string size = "1280x720";
+  bool mono = false;
+  std::string camera = "head";
+  bool software = false, validation = false, realtime = false, no_hud = false;
+  std::string hand = "right";
+  int sim_subject = 3;
+  std::uint64_t seed = 1;
+  // Study samples.
+  std::string participant;   // "sim", or a real participant's id
+  int participants = 1;      // --participant sim: how many simulated participants
+  std::string design;        // the sample's config file; empty: published defaults
+  bool resume = false;       // continue a crashed session in --out
+  bool force = false;        // overwrite existing session data
+};
+
+// The engine options the flags describe (output, size, frames, camera, ...).
+Result<engine::AppOptions> app_options_from(const RunArgs& a);
+
+// Hand source and haptic channels for `scene` as the flags describe them.
+// `simulated_time`: headless runs stepping a ManualClock (placed in
+// inputs.simulated_clock) that the hand source reads.
+Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene& scene,
+                                          const engine::AppOptions& options);
+
+// Runs an App to completion, with Ctrl-C stopping it cleanly.
+Result<engine::AppReport> run_app_until_done(engine::App& app);
+
+// Study samples; each returns the process exit code.
+int run_perception_threshold(const RunArgs& a);
+int run_peg_in_hole(const RunArgs& a);
+
+}  // namespace proprio::cli

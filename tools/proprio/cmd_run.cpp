@@ -188,7 +188,7 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--fingers", a->fingers, "fingers with a device")->delimiter(',')->capture_default_str();
   cmd->add_option("--frames", a->frames, "frames to render (default: 90 headless, until closed otherwise)");
   cmd->add_option("--fps", a->fps, "headless frame rate (simulated time step)")->capture_default_str();
-  cmd->add_option("--out", a->out, "headless: folder for the PNG frames; studies: the session folder")
+  auto* out_option = cmd->add_option("--out", a->out, "headless: folder for the PNG frames; studies: the session folder")
       ->capture_default_str();
   cmd->add_option("--size", a->size, "per-eye image size (headless, window)")->capture_default_str();
   cmd->add_flag("--mono", a->mono, "headless: one eye instead of a stereo pair");
@@ -199,19 +199,25 @@ void add_run_command(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"left", "right"}))
       ->capture_default_str();
   cmd->add_option("--sim-subject", a->sim_subject, "--hands sim: simulated subject")->capture_default_str();
-  cmd->add_option("--seed", a->seed, "--hands sim: motion seed")->capture_default_str();
+  auto* seed_option = cmd->add_option("--seed", a->seed, "--hands sim: motion seed; studies: the study's seed "
+                                                         "(default: the design's)")
+                          ->capture_default_str();
   cmd->add_flag("--software", a->software, "force Mesa's lavapipe (CPU) renderer");
   cmd->add_flag("--validation", a->validation, "Vulkan validation layer, on by default in debug builds (fails the run on any validation error)");
   cmd->add_flag("--realtime", a->realtime, "headless: run on the wall clock instead of simulated time");
   cmd->add_flag("--no-hud", a->no_hud, "no text overlay");
   cmd->add_option("--participant", a->participant,
                   "run the scene's study (perception-threshold, peg-in-hole): 'sim' for simulated participants, "
-                  "or a real participant's id");
+                  "or a real participant's id (its number sets the counterbalancing position: P07 is the 7th)");
   cmd->add_option("--participants", a->participants, "--participant sim: how many")->capture_default_str();
   cmd->add_option("--design", a->design, "the study's config file (default: the published protocol)");
   cmd->add_flag("--resume", a->resume, "continue the crashed session in --out at its next trial");
   cmd->add_flag("--force", a->force, "overwrite session data already in --out");
-  cmd->callback([a, &exit_code] { exit_code = run(*a); });
+  cmd->callback([a, &exit_code, out_option, seed_option] {
+    a->out_given = out_option->count() > 0;
+    a->seed_given = seed_option->count() > 0;
+    exit_code = run(*a);
+  });
 }
 
 }  // namespace proprio::cli

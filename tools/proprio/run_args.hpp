@@ -34,6 +34,7 @@ struct RunArgs {
   std::string hand = "right";
   int sim_subject = 3;
   std::uint64_t seed = 1;
+  bool seed_given = false;   // --seed on the command line (studies: replaces the design's seed)
   // Study samples.
   std::string participant;   // "sim", or a real participant's id
   int participants = 1;      // --participant sim: how many simulated participants

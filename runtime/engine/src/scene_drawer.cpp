@@ -60,7 +60,8 @@ void SceneDrawer::append_scene(render::DrawList& draws, const std::vector<Pose>&
     if (i < styles.size()) {
       if (!styles[i].visible) continue;
       const auto& c = styles[i].rgba;
-      draws.items.push_back({meshes_[i], to_glm(T_world_entity[i]), {c[0], c[1], c[2], c[3]}});
+      const Pose& T = styles[i].T_world_entity ? *styles[i].T_world_entity : T_world_entity[i];
+      draws.items.push_back({meshes_[i], to_glm(T), {c[0], c[1], c[2], c[3]}});
     } else {
       draws.items.push_back({meshes_[i], to_glm(T_world_entity[i]), colors_[i]});
     }

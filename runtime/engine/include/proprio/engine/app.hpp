@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -79,6 +80,9 @@ struct FrameContext {
   struct EntityStyle {
     bool visible = true;
     std::array<float, 4> rgba{};  // starts as the scene's colour
+    // Drawn here instead of where the scene (or the simulation) puts it. Only
+    // the drawing moves: a physics body stays where it is.
+    std::optional<Pose> T_world_entity;
   };
   std::vector<EntityStyle> entities;  // one per scene entity, in scene order
   struct Marker {

@@ -28,6 +28,8 @@ class ForceChannel {
   // What the device renders (its force sensors, or the last command).
   haptics::FingertipForce felt() const noexcept { return sink_ ? sink_->measured() : last_sent_; }
   const haptics::SafetyGate& gate() const noexcept { return gate_; }
+  // The force last sent to the device (after the gate).
+  const haptics::FingertipForce& sent() const noexcept { return last_sent_; }
   std::string describe() const;
 
  private:

@@ -484,6 +484,8 @@ struct ContactSimulation::Impl {
   std::vector<bool> geom_hand;    // per geom: part of the proxy
   std::vector<int> hand_bodies;   // gravity compensation
   std::vector<int> object_body_of_geom;  // per geom: scene body id, or -1
+  std::vector<int> free_bodies;          // free scene objects, scene order
+  std::vector<std::string> free_names;
 
   Pose target_wrist;
   HandAngles target_angles{};
@@ -491,6 +493,12 @@ struct ContactSimulation::Impl {
   ContactSimStats stats;
   std::uint64_t rejected_targets = 0;
   std::array<int, mjNWARNING> warnings_seen{};
+  struct Spring {
+    int body = -1, dof = 0;
+    Vec3 anchor = Vec3::Zero();
+    double k = 0.0, c = 0.0;
+  };
+  std::vector<Spring> springs;  // sized once by set_object_spring, never in step()
 
   Impl(ContactSimOptions o, const HandModel& hm, Handedness h) : options(std::move(o)), hand_model(hm), hand(h) {}
 
@@ -648,6 +656,14 @@ Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model,
     impl->geom_hand[static_cast<std::size_t>(g)] = is_hand;
     if (!is_hand && b != 0) impl->object_body_of_geom[static_cast<std::size_t>(g)] = b;
   }
+  for (const SceneObject& o : scene.objects) {
+    if (o.fixed) continue;
+    const int b = mj_name2id(m, mjOBJ_BODY, o.name.c_str());
+    if (b > 0) {
+      impl->free_bodies.push_back(b);
+      impl->free_names.push_back(o.name);
+    }
+  }
   for (int k = 0; k < mjNWARNING; ++k) impl->warnings_seen[static_cast<std::size_t>(k)] = impl->data->warning[k].number;
 
   ContactSimulation sim(std::move(impl));
@@ -700,6 +716,12 @@ void ContactSimulation::step() noexcept {
   for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[s.dof_actuator[i]] = s.target_angles[i];
   s.place_target();
   s.compensate_gravity();
+  for (const Impl::Spring& sp : s.springs) {
+    const Vec3 p = vec_from(s.data->xipos + 3 * sp.body);
+    const Vec3 v = vec_from(s.data->qvel + sp.dof);  // a free joint's linear velocity is in world axes
+    const Vec3 f = sp.k * (sp.anchor - p) - sp.c * v;
+    for (int k = 0; k < 3; ++k) s.data->xfrc_applied[6 * sp.body + k] = f[k];
+  }
   mj_step(s.model.get(), s.data.get());
   ++s.stats.steps;
 
@@ -753,6 +775,15 @@ Result<Pose> ContactSimulation::object_pose(std::string_view name) const {
   return Pose{quat_from(s.data->xquat + 4 * b), vec_from(s.data->xpos + 3 * b)};
 }
 
+std::size_t ContactSimulation::free_object_count() const noexcept { return impl_->free_bodies.size(); }
+const std::string& ContactSimulation::free_object_name(std::size_t i) const { return impl_->free_names.at(i); }
+Pose ContactSimulation::free_object_pose(std::size_t i) const noexcept {
+  const Impl& s = *impl_;
+  if (i >= s.free_bodies.size()) return Pose{};
+  const int b = s.free_bodies[i];
+  return Pose{quat_from(s.data->xquat + 4 * b), vec_from(s.data->xpos + 3 * b)};
+}
+
 Status ContactSimulation::place_object(std::string_view name, const Pose& T_world_object) {
   Impl& s = *impl_;
   const int b = s.body_of(name);
@@ -772,6 +803,27 @@ Status ContactSimulation::place_object(std::string_view name, const Pose& T_worl
   qpos[6] = q.z();
   for (int k = 0; k < 6; ++k) s.data->qvel[m->jnt_dofadr[j] + k] = 0.0;
   mj_forward(m, s.data.get());
+  return {};
+}
+
+Status ContactSimulation::set_object_spring(std::string_view name, const Vec3& p_anchor_in_world,
+                                            double stiffness_n_per_m, double damping_ns_per_m) {
+  Impl& s = *impl_;
+  const int b = s.body_of(name);
+  if (b <= 0) return make_error(Errc::not_found, "no scene object named '" + std::string(name) + "'");
+  const mjModel* m = s.model.get();
+  if (m->body_jntnum[b] != 1 || m->jnt_type[m->body_jntadr[b]] != mjJNT_FREE) {
+    return make_error(Errc::invalid_argument, "scene object '" + std::string(name) + "' is fixed; a spring needs a free object");
+  }
+  if (!p_anchor_in_world.allFinite() || !std::isfinite(stiffness_n_per_m) || !std::isfinite(damping_ns_per_m) ||
+      stiffness_n_per_m < 0.0 || damping_ns_per_m < 0.0) {
+    return make_error(Errc::invalid_argument, "spring anchor must be finite, stiffness and damping finite and >= 0");
+  }
+  std::erase_if(s.springs, [b](const Impl::Spring& sp) { return sp.body == b; });
+  for (int k = 0; k < 6; ++k) s.data->xfrc_applied[6 * b + k] = 0.0;
+  if (stiffness_n_per_m > 0.0 || damping_ns_per_m > 0.0) {
+    s.springs.push_back({b, m->jnt_dofadr[m->body_jntadr[b]], p_anchor_in_world, stiffness_n_per_m, damping_ns_per_m});
+  }
   return {};
 }
 

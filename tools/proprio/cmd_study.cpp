@@ -14,6 +14,7 @@
 #include "commands.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/study/analysis.hpp"
+#include "proprio/study/completion_time.hpp"
 #include "proprio/study/csv.hpp"
 #include "proprio/study/design.hpp"
 #include "proprio/study/plot.hpp"
@@ -360,7 +361,35 @@ struct AnalyzeArgs {
 
 std::string fmt_or_dash(double v) { return std::isfinite(v) ? fmt::format("{:.4g}", v) : std::string("-"); }
 
+// Timed-task studies (sidecar kind "completion-time", e.g. peg-in-hole):
+// normalised times, RM-ANOVA with Greenhouse-Geisser, post-hoc tests, plot.
+bool is_completion_time_study(const fs::path& dir) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    if (e.path().extension() != ".json") continue;
+    auto kind = sidecar_kind(e.path());
+    if (kind && *kind == "completion-time") return true;
+  }
+  return false;
+}
+
+int run_completion_time_analyze(const AnalyzeArgs& args) {
+  auto a = analyze_completion_time_study(args.dir);
+  if (!a) return report_error(a.error());
+  const fs::path out = args.out.empty() ? fs::path(args.dir) / "report" : fs::path(args.out);
+  auto files = write_completion_time_report(*a, out, "Normalised completion time per setting");
+  if (!files) return report_error(files.error());
+  if (args.json) {
+    std::printf("%s\n", completion_time_json(*a).c_str());
+  } else {
+    std::printf("%s\nReport in %s: anova.txt, summary.json, normalised_times.csv, normalised_time.svg\n",
+                completion_time_text(*a).c_str(), out.c_str());
+  }
+  return 0;
+}
+
 int run_analyze(const AnalyzeArgs& args) {
+  if (is_completion_time_study(args.dir)) return run_completion_time_analyze(args);
   StudyAnalysisOptions o;
   if (!args.model.empty()) {
     auto m = parse_psychometric_model(args.model);

@@ -84,6 +84,13 @@ Status App::Impl::build_servo() {
   auto loop = haptics::ServoLoop::create(std::move(*sim), inputs.haptic_channels, inputs.servo_options);
   if (!loop) return loop.error();
   servo = std::move(*loop);
+  entity_free_object.assign(scene.entities.size(), -1);
+  for (std::size_t i = 0; i < scene.entities.size(); ++i) {
+    if (scene.entities[i].physics != Physics::free) continue;
+    for (std::size_t k = 0; k < servo->simulation().free_object_count(); ++k) {
+      if (servo->simulation().free_object_name(k) == scene.entities[i].body.name) entity_free_object[i] = static_cast<int>(k);
+    }
+  }
   return {};
 }
 
@@ -118,6 +125,11 @@ void App::Impl::read_servo_snapshot() {
   const haptics::ServoSnapshot* snap = servo->latest();
   if (!snap) return;
   proxy = snap->proxy;
+  // Free bodies move in live runs too: the servo thread publishes their poses.
+  for (std::size_t i = 0; i < entity_free_object.size() && i < entity_poses.size(); ++i) {
+    const int k = entity_free_object[i];
+    if (k >= 0 && static_cast<std::size_t>(k) < snap->object_count) entity_poses[i] = snap->object_poses[static_cast<std::size_t>(k)];
+  }
   double force = 0;
   std::string gate = "off";
   for (std::size_t c = 0; c < snap->channel_count; ++c) {

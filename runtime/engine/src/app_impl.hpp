@@ -19,6 +19,9 @@ struct App::Impl {
   std::shared_ptr<const HandModel> hand_model;
   std::unique_ptr<haptics::ServoLoop> servo;
   std::vector<Pose> entity_poses;
+  // Per entity: its index among the simulation's free objects (the servo
+  // snapshot's object_poses), or -1.
+  std::vector<int> entity_free_object;
   HandPose tracked;
   HandPose proxy;
   std::string hud_status;

@@ -224,8 +224,8 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
   d.source_name = source_name;
 
   STUDY_TRY(study, root.table("study"));
-  if (Status s = only_known_keys(study, "study", {"name", "description", "seed", "stimulus", "stimulus_unit",
-                                                  "response", "extra_columns"});
+  if (Status s = only_known_keys(study, "study", {"name", "kind", "description", "seed", "stimulus",
+                                                  "stimulus_unit", "response", "extra_columns"});
       !s) {
     return s.error();
   }
@@ -234,6 +234,11 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
     return config_error(study, "name", "must use only letters, digits, '_' and '-' (it becomes part of file names)");
   }
   d.name = name;
+  STUDY_TRY(kind, study.get_string_or("kind", "psychometric"));
+  if (kind != "psychometric" && kind != "completion-time") {
+    return config_error(study, "kind", "must be \"psychometric\" (threshold fits) or \"completion-time\" (timed tasks)");
+  }
+  d.kind = kind;
   STUDY_TRY(description, study.get_string_or("description", ""));
   d.description = description;
   STUDY_TRY(seed, study.get_int_or("seed", 1, 0, INT64_MAX));

@@ -373,6 +373,7 @@ Result<Session> Session::open(const StudyDesign& design, const SessionOptions& o
   j["format"] = "proprio-study-session";
   j["format_version"] = 1;
   j["study"] = design.name;
+  j["kind"] = design.kind;
   j["description"] = design.description;
   j["design_file"] = design.source_name;
   j["design_hash"] = hex64(design_hash(design.source_text));

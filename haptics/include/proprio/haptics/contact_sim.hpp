@@ -154,8 +154,19 @@ class ContactSimulation {
   const FingertipContact& fingertip(Finger finger) const noexcept;
   // A free object's pose (Errc::not_found for unknown or fixed objects).
   Result<Pose> object_pose(std::string_view name) const;
+  // The free objects (scene order) and their poses by index: the servo loop
+  // publishes them each tick without a name lookup.
+  std::size_t free_object_count() const noexcept;
+  const std::string& free_object_name(std::size_t i) const;
+  Pose free_object_pose(std::size_t i) const noexcept;
   // Sets a free object's pose and zeroes its velocity (respawn).
   Status place_object(std::string_view name, const Pose& T_world_object);
+  // Hangs a free object on a linear spring (N/m) and damper (N s/m) from a
+  // world anchor, acting at its centre of mass (e.g. the peg-in-hole
+  // familiarisation's peg "suspended in the air by a spring"). Stiffness 0
+  // removes it. Not while the servo thread runs.
+  Status set_object_spring(std::string_view name, const Vec3& p_anchor_in_world, double stiffness_n_per_m,
+                           double damping_ns_per_m);
   // Total contact force (N, world) between the hand and the named object.
   Vec3 hand_force_on_object(std::string_view name) const;
   ContactSimStats stats() const noexcept;

@@ -92,6 +92,11 @@ struct ServoSnapshot {
   };
   std::array<Channel, kMaxServoChannels> channels{};
   std::size_t channel_count = 0;
+  // Free objects' poses, in ContactSimulation::free_object_name order (the
+  // renderer and a study's rules read them while the loop owns the simulation).
+  static constexpr std::size_t kMaxObjects = 16;
+  std::array<Pose, kMaxObjects> object_poses{};
+  std::size_t object_count = 0;
 };
 
 struct ServoTiming {

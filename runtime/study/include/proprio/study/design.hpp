@@ -63,6 +63,9 @@ struct AnalysisDesign {
 struct StudyDesign {
   std::string name;                 // [A-Za-z0-9_-]+, used in file names
   std::string description;
+  // Which analysis `proprio study analyze` runs: "psychometric" (fits and
+  // thresholds) or "completion-time" (timed tasks such as peg-in-hole).
+  std::string kind = "psychometric";
   std::uint64_t seed = 1;           // the study's seed; participants get mix_seed(seed, index)
   std::string stimulus_column = "stimulus";
   std::string stimulus_unit;        // as the experimenter states it (e.g. "cm"), for reports

@@ -1,0 +1,141 @@
+#pragma once
+// The peg-in-hole study's configuration (Lee 2021 §3.3.3, Fig. 3.7/3.8).
+// Defaults are the published values; everything is configurable from TOML
+// (format: docs/peg-in-hole.md). SI units throughout, keys carry the unit.
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "proprio/core/hand_joint.hpp"
+#include "proprio/core/math.hpp"
+#include "proprio/core/result.hpp"
+
+namespace proprio::peg_in_hole {
+
+struct PegOptions {
+  // "a round bottle": 186.2 mm tall, radius 25.84 mm, 500 g.
+  double radius_m = 0.02584;
+  double length_m = 0.1862;
+  double mass_kg = 0.5;
+  double friction = 0.8;
+  // Breaks when the filtered fingertip contact force reaches this (>=).
+  double break_force_n = 5.0;
+  // First-order low-pass on the largest fingertip normal force before the
+  // break test: MuJoCo's contact forces spike for a step or two when a finger
+  // lands, which a real bottle would not notice. The thesis gives no value.
+  double break_filter_time_constant_s = 0.02;
+  // Colour: white at 0 N to blue at colour_scale_max_n ("0 <= |lambda_N| <= 10 N").
+  double colour_scale_max_n = 10.0;
+  // A broken peg shows its broken colour this long, then respawns at the start.
+  double respawn_delay_s = 0.5;
+  // A peg that falls off the table or tips over is put back by the
+  // experimenter (the clock keeps running). Not in the thesis; see the docs.
+  bool respawn_dropped = true;
+};
+
+struct HoleOptions {
+  double clearance_m = 0.002;        // radial
+  double plate_thickness_m = 0.06;
+  double insertion_depth_m = 0.03;   // the peg's leading end this far past the plate's front face = done
+};
+
+// Where things are at the start of a trial: nominal positions plus a uniform
+// random offset in [-range, +range] per axis ("randomly (yet not too much)").
+struct LayoutOptions {
+  double table_height_m = 0.85;
+  Vec3 peg_start_m = Vec3(0.0, 0.85, -0.40);  // the peg's base centre, standing upright
+  Vec3 peg_start_range_m = Vec3(0.04, 0.0, 0.03);
+  Vec3 hole_m = Vec3(0.25, 1.0, -0.45);       // the hole's centre on the plate's front face (axis along +x)
+  Vec3 hole_range_m = Vec3(0.0, 0.04, 0.04);
+};
+
+struct FamiliarisationOptions {
+  double spring_phase_s = 180.0;  // touch and grasp a peg hanging on a spring
+  double ground_phase_s = 180.0;  // lift and rotate it from the ground
+  Vec3 spring_anchor_m = Vec3(0.0, 1.05, -0.40);
+  double spring_stiffness_n_per_m = 200.0;
+  double spring_damping_ns_per_m = 5.0;
+};
+
+struct MainTaskOptions {
+  int repetitions = 5;             // of the four settings, each round in random order
+  int familiarisation_trials = 4;  // the first round counts as familiarisation
+  double trial_timeout_s = 120.0;  // a trial not done by then is recorded as timed out
+};
+
+struct DeviceOptions {
+  std::vector<Finger> fingers{Finger::thumb, Finger::index, Finger::middle};
+  std::filesystem::path model;  // empty: config/haptics/platform_3dof.toml (3-DOF)
+};
+
+struct RecordingOptions {
+  bool enabled = true;
+  double rate_hz = 100.0;  // hand and peg poses
+};
+
+// The simulated participant (docs/peg-in-hole.md, "Simulated user").
+struct SimUserOptions {
+  double hand_length_m = 0.19, hand_width_m = 0.09;
+  double reach_speed_mps = 0.35;       // mean wrist speed of a reach (min-jerk profile)
+  double lift_height_m = 0.10;         // above the table, before rotating
+  double rotate_duration_s = 0.9;
+  double insert_speed_mps = 0.04;
+  // Motor noise: wrist position noise grows with speed (signal-dependent),
+  // plus a slow drift (physiological tremor is far smaller than this).
+  double position_noise_m = 0.0015;
+  double speed_noise_fraction = 0.04;
+  double angle_noise_rad = 0.01;
+  // Perception. Vision: the peg's and the rendered hand's poses, with noise;
+  // the peg colour read as force with noise. Touch: the device's force.
+  double visual_position_noise_m = 0.0008;
+  double visual_angle_noise_rad = 0.008;
+  double visual_force_noise_n = 0.9;   // reading 0-10 N off the white-blue colour
+  double haptic_force_noise_n = 0.15;
+  double visual_reaction_s = 0.25;     // a corrective submovement after a visual check
+  // Grip: with touch, regulate the felt force to the target and raise it with
+  // the felt load (grip-load coupling); without, close by feel-less feed-forward
+  // and look at the colour.
+  double grip_target_n = 3.6;
+  double grip_load_ratio = 1.3;        // grip >= ratio * felt shear / friction
+  double closing_speed = 0.6;          // posture closure per second
+  double feedforward_closure = 0.42;   // extra closure past contact without touch
+  double feedforward_closure_sd = 0.12;
+  // Ab/adduction in the planned grasp: index radial, middle ulnar (spreads the
+  // fingers under the peg against its tilt).
+  double index_abduction_rad = 0.22;
+  double middle_abduction_rad = -0.2;
+  double alignment_tolerance_m = 0.0015;
+  double alignment_tolerance_rad = 0.03;
+};
+
+struct PegInHoleConfig {
+  std::string name = "peg-in-hole";
+  std::uint64_t seed = 1;
+  PegOptions peg;
+  HoleOptions hole;
+  LayoutOptions layout;
+  FamiliarisationOptions familiarisation;
+  MainTaskOptions main_task;
+  DeviceOptions devices;
+  RecordingOptions recording;
+  SimUserOptions sim_user;
+
+  Status validate() const;
+  std::string describe() const;
+
+  static Result<PegInHoleConfig> load_file(const std::filesystem::path& path);
+  static Result<PegInHoleConfig> parse(const std::string& toml_text, const std::string& source_name = "<config>");
+};
+
+// The four settings in the thesis's numbering.
+struct Setting {
+  bool haptics = true;
+  bool abduction = true;
+  int number() const noexcept { return haptics ? (abduction ? 1 : 2) : (abduction ? 3 : 4); }
+  std::string label() const;  // "wHF+wAA"
+};
+Setting setting_from_number(int number);
+
+}  // namespace proprio::peg_in_hole

@@ -1,0 +1,301 @@
+#include "proprio/peg_in_hole/study_runner.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "proprio/core/random.hpp"
+#include "proprio/core/recording.hpp"
+#include "proprio/study/session.hpp"
+
+namespace proprio::peg_in_hole {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string simulated_participant_id(int index) { return fmt::format("sim{:02d}", index + 1); }
+
+namespace {
+
+Percept perceive(const PegWorld& w, const std::vector<Finger>& fingers) {
+  Percept p;
+  const haptics::ServoSnapshot& s = w.snapshot();
+  p.time_ns = w.now_ns();
+  p.T_world_peg = w.peg_pose();
+  p.peg_rgba = w.peg_rgba();
+  p.T_world_proxy_wrist = s.proxy.joint(HandJoint::wrist);
+  for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.proxy.joint(tip_of(static_cast<Finger>(f))).p;
+  p.hole = w.hole();
+  // Touch: what each device renders (its force sensors), nothing else.
+  for (std::size_t c = 0; c < s.channel_count && c < fingers.size(); ++c) {
+    const auto fi = static_cast<std::size_t>(s.channels[c].finger);
+    p.felt_normal_n[fi] = std::max(0.0, s.channels[c].measured.normal_n);
+    p.felt_shear_n[fi] = s.channels[c].measured.shear_magnitude_n();
+  }
+  return p;
+}
+
+Pose rest_wrist(const PegInHoleConfig& c, const TrialLayout& layout) {
+  // Hand resting in front of the body, to the right of and above the peg.
+  const Quat q(Eigen::AngleAxisd(-0.3, Vec3::UnitX()));
+  return Pose{q, layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)};
+}
+
+}  // namespace
+
+Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting,
+                                        SimulatedUser& user, const HandModel& hand_model,
+                                        std::shared_ptr<const haptics::FingertipDeviceModel> device_model,
+                                        const SimulatedTrialOptions& options) {
+  auto world_r = PegWorld::create(config, layout, setting, hand_model, std::move(device_model), options.phase);
+  if (!world_r) return world_r.error();
+  PegWorld& world = **world_r;
+
+  std::optional<RecordingWriter> rec;
+  StreamId s_tracked = 0, s_proxy = 0, s_peg = 0, s_events = 0;
+  if (!options.recording.empty()) {
+    RecordingWriterOptions ro;
+    ro.overwrite = true;  // a trial repeated after a crash replaces its half-written recording
+    auto w = RecordingWriter::create(options.recording, ro);
+    if (!w) return w.error();
+    rec.emplace(std::move(*w));
+    const std::string rate = fmt::format("{{\"rate_hz\": {}}}", options.recording_rate_hz);
+    auto a = rec->add_stream(StreamKind::hand_pose, "hand/right/tracked", rate);
+    auto b = rec->add_stream(StreamKind::hand_pose, "hand/right/proxy", rate);
+    auto c = rec->add_stream(StreamKind::rigid_pose, "object/peg", rate);
+    auto d = rec->add_stream(StreamKind::event, "events", options.recording_meta);
+    if (!a || !b || !c || !d) return make_error(Errc::io_error, "cannot add streams to " + options.recording.string());
+    s_tracked = *a;
+    s_proxy = *b;
+    s_peg = *c;
+    s_events = *d;
+    if (Status st = rec->write(s_events, Event{fmt::format("start setting {} ({})", setting.number(), setting.label())}, 0);
+        !st) {
+      return st.error();
+    }
+  }
+  const auto record_every = static_cast<std::int64_t>(std::max(1.0, std::round(1000.0 / options.recording_rate_hz)));
+
+  user.begin(world.now_ns(), rest_wrist(config, layout));
+  const auto limit_ticks = static_cast<std::int64_t>(std::llround(options.time_limit_s * 1000.0));
+  TrialResult r;
+  const HandModel& model = world.hand_model();
+  for (std::int64_t tick = 0; tick < limit_ticks; ++tick) {
+    const HandCommand cmd = user.act(perceive(world, config.devices.fingers));
+    world.submit_hand(cmd.T_world_wrist, cmd.angles);
+    const PegEvent ev = world.step();
+    if (rec && (tick % record_every == 0 || ev.kind != PegEvent::Kind::none)) {
+      const HandPose tracked = model.forward(Handedness::right, cmd.angles, cmd.T_world_wrist, world.now_ns());
+      Status st = rec->write(s_tracked, tracked);
+      if (st) st = rec->write(s_proxy, world.snapshot().proxy);
+      if (st) st = rec->write(s_peg, RigidPose{world.peg_pose()}, world.now_ns());
+      if (st && ev.kind != PegEvent::Kind::none) {
+        static const char* names[] = {"none", "break", "respawn", "drop", "inserted"};
+        st = rec->write(s_events, Event{names[static_cast<int>(ev.kind)]}, world.now_ns());
+      }
+      if (!st) return st.error();
+    }
+    if (ev.kind == PegEvent::Kind::inserted) {
+      r.completed = true;
+      break;
+    }
+  }
+  r.completion_time_s = world.elapsed_s();
+  r.breaks = world.breaks();
+  r.drops = world.drops();
+  r.regrasps = user.regrasps();
+  r.peak_force_n = world.peak_force_n();
+  r.mean_force_n = world.mean_force_n();
+  r.timing = world.timing();
+  if (rec) {
+    if (Status st = rec->write(s_events, Event{r.completed ? "done" : "time limit"}, world.now_ns()); !st) return st.error();
+    if (Status st = rec->close(); !st) return st.error();
+  }
+  world.servo().disengage_and_zero(world.now_ns());
+  return r;
+}
+
+namespace {
+
+struct Shared {
+  std::mutex mutex;
+  SimulatedStudyReport report;
+  std::atomic<int> trials_total{0};
+  std::atomic<bool> stop{false};
+  std::optional<Error> error;
+};
+
+void accumulate(Shared& sh, const TrialResult& r) {
+  std::lock_guard<std::mutex> lock(sh.mutex);
+  SimulatedStudyReport& rep = sh.report;
+  rep.ticks += r.timing.ticks;
+  rep.overruns += r.timing.overruns;
+  rep.tick_p50_us = std::max(rep.tick_p50_us, r.timing.tick_p50_us);
+  rep.tick_p99_us = std::max(rep.tick_p99_us, r.timing.tick_p99_us);
+  rep.tick_max_us = std::max(rep.tick_max_us, r.timing.tick_max_us);
+  rep.simulated_s += r.completion_time_s;
+}
+
+Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOptions& options,
+                       const study::StudyDesign& design, int index, Shared& shared,
+                       const std::shared_ptr<const haptics::FingertipDeviceModel>& device) {
+  const std::string id = simulated_participant_id(index);
+  study::SessionOptions so;
+  so.out_dir = options.out_dir;
+  so.participant = id;
+  so.participant_index = index;
+  so.sync_each_trial = false;  // simulated: see SessionOptions
+  so.device_json = json{{"fingertip_devices", "emulated (in-process, real wire encoding)"},
+                        {"fingers", config.devices.fingers.size()},
+                        {"participant_kind", "simulated"},
+                        {"config", config.describe()}}
+                       .dump();
+  auto session = study::Session::open(design, so);
+  if (!session) return session.error();
+  {
+    std::lock_guard<std::mutex> lock(shared.mutex);
+    shared.report.trials_recovered += session->recovered_trials();
+    shared.report.csv_files.push_back(session->csv_path());
+  }
+  // The participant: its hand and its seed; it learns across trials, so a
+  // resumed participant replays its familiarisation (its state is not saved).
+  const std::uint64_t pseed = session->participant_seed();
+  auto shape = HandShape::from_measurements(config.sim_user.hand_length_m, config.sim_user.hand_width_m);
+  if (!shape) return shape.error();
+  const HandModel hand(*shape);
+  SimulatedUser user(config, hand, mix_seed(pseed, 0x55534552));
+  const fs::path rec_dir = options.out_dir / "recordings";
+  if (config.recording.enabled) fs::create_directories(rec_dir);
+  if (options.familiarisation && session->completed_trials() == 0) {
+    const TrialLayout layout = trial_layout(config, pseed, -1);
+    for (auto [phase, seconds] : {std::pair{WorldPhase::spring, config.familiarisation.spring_phase_s},
+                                  std::pair{WorldPhase::ground, config.familiarisation.ground_phase_s}}) {
+      if (seconds <= 0.0) continue;
+      user.set_grasp_only(phase == WorldPhase::spring);
+      SimulatedTrialOptions to;
+      to.phase = phase;
+      to.time_limit_s = seconds;
+      auto r = run_simulated_trial(config, layout, Setting{true, true}, user, hand, device, to);
+      if (!r) return r.error();
+      user.set_grasp_only(false);
+      if (options.progress) {
+        options.progress(fmt::format("{} familiarisation ({}): {:.0f} s, {} breaks", id,
+                                     phase == WorldPhase::spring ? "spring" : "ground", seconds, r->breaks));
+      }
+    }
+  }
+  while (!session->finished() && !shared.stop.load()) {
+    auto trial = session->next_trial();
+    if (!trial) return trial.error();
+    const Setting setting = setting_of(trial->levels);
+    const TrialLayout layout = trial_layout(config, pseed, trial->index);
+    SimulatedTrialOptions to;
+    to.time_limit_s = config.main_task.trial_timeout_s;
+    const std::string rec_name = fmt::format("{}_trial{:02d}.prec", id, trial->index + 1);
+    if (config.recording.enabled) {
+      to.recording = rec_dir / rec_name;
+      to.recording_rate_hz = config.recording.rate_hz;
+      to.recording_meta = json{{"participant", id}, {"trial", trial->index}, {"setting", setting.number()}}.dump();
+    }
+    auto r = run_simulated_trial(config, layout, setting, user, hand, device, to);
+    if (!r) return r.error();
+    study::Response resp;
+    resp.correct = r->completed;
+    resp.response_time_s = r->completion_time_s;
+    auto& e = resp.extra;
+    e["setting"] = std::to_string(setting.number());
+    e["setting_label"] = setting.label();
+    e["familiarisation"] = trial->index < config.main_task.familiarisation_trials ? "1" : "0";
+    e["completion_time_s"] = fmt::format("{:.3f}", r->completion_time_s);
+    e["timed_out"] = r->completed ? "0" : "1";
+    e["breaks"] = std::to_string(r->breaks);
+    e["drops"] = std::to_string(r->drops);
+    e["peak_force_n"] = fmt::format("{:.3f}", r->peak_force_n);
+    e["mean_force_n"] = fmt::format("{:.3f}", r->mean_force_n);
+    e["peg_start_x_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.x());
+    e["peg_start_z_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.z());
+    e["hole_y_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.y());
+    e["hole_z_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.z());
+    e["recording"] = config.recording.enabled ? "recordings/" + rec_name : "";
+    e["participant_kind"] = "simulated";
+    if (Status st = session->record(*trial, resp); !st) return st;
+    accumulate(shared, *r);
+    if (options.progress) {
+      options.progress(fmt::format("{} trial {:2d}/{}: setting {} ({}), {:.1f} s{}, {} breaks", id, trial->index + 1,
+                                   session->planned_trials(), setting.number(), setting.label(), r->completion_time_s,
+                                   r->completed ? "" : " (timed out)", r->breaks));
+    }
+    {
+      std::lock_guard<std::mutex> lock(shared.mutex);
+      ++shared.report.trials_run;
+    }
+    const int total = ++shared.trials_total;
+    if (options.stop_after_trials >= 0 && total >= options.stop_after_trials) shared.stop.store(true);
+  }
+  return {};
+}
+
+}  // namespace
+
+Result<SimulatedStudyReport> run_simulated_study(const PegInHoleConfig& config_in, const SimulatedStudyOptions& options) {
+  PegInHoleConfig config = config_in;
+  config.seed = options.seed;
+  if (Status s = config.validate(); !s) return s.error();
+  if (options.participants < 1 || options.participants > 999) {
+    return make_error(Errc::invalid_argument, "--participants must be between 1 and 999");
+  }
+  if (options.out_dir.empty()) return make_error(Errc::invalid_argument, "an output folder (--out) is needed");
+  auto design = study_design(config);
+  if (!design) return design.error();
+  std::error_code ec;
+  if (fs::exists(options.out_dir) && !fs::is_empty(options.out_dir, ec)) {
+    bool has_sessions = false;
+    for (const auto& e : fs::directory_iterator(options.out_dir)) {
+      has_sessions |= e.path().extension() == ".csv" && e.path().filename().string().rfind(design->name, 0) == 0;
+    }
+    if (has_sessions && options.force) {
+      for (const auto& e : fs::directory_iterator(options.out_dir)) {
+        const std::string n = e.path().filename().string();
+        if (n.rfind(design->name + "_", 0) == 0) fs::remove(e.path(), ec);
+      }
+      fs::remove_all(options.out_dir / "recordings", ec);
+    } else if (has_sessions && !options.resume) {
+      return make_error(Errc::invalid_argument,
+                        fmt::format("{} already holds {} sessions: pass --resume to continue them or --force to "
+                                    "start over",
+                                    options.out_dir.string(), design->name));
+    }
+  }
+  fs::create_directories(options.out_dir, ec);
+  if (ec) return make_error(Errc::io_error, fmt::format("cannot create {}: {}", options.out_dir.string(), ec.message()));
+  auto device = load_device_model(config);
+  if (!device) return device.error();
+
+  Shared shared;
+  shared.report.participants = options.participants;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::atomic<int> next{0};
+  const auto worker = [&] {
+    for (int i = next++; i < options.participants && !shared.stop.load(); i = next++) {
+      if (Status s = run_participant(config, options, *design, i, shared, *device); !s) {
+        std::lock_guard<std::mutex> lock(shared.mutex);
+        if (!shared.error) shared.error = s.error().with_context(simulated_participant_id(i));
+        shared.stop.store(true);
+      }
+    }
+  };
+  const int threads = std::clamp(options.threads, 1, options.participants);
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  shared.report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (shared.error) return *shared.error;
+  std::sort(shared.report.csv_files.begin(), shared.report.csv_files.end());
+  return shared.report;
+}
+
+}  // namespace proprio::peg_in_hole

@@ -1,0 +1,159 @@
+#include "proprio/peg_in_hole/world.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "proprio/haptics/contact_sim.hpp"
+#include "proprio/haptics/emulated_fingertip.hpp"
+
+#ifndef PROPRIO_SOURCE_DIR
+#define PROPRIO_SOURCE_DIR "."
+#endif
+
+namespace proprio::peg_in_hole {
+
+Result<std::shared_ptr<const haptics::FingertipDeviceModel>> load_device_model(const PegInHoleConfig& config) {
+  const std::filesystem::path path = config.devices.model.empty()
+                                         ? std::filesystem::path(PROPRIO_SOURCE_DIR) / "config/haptics/platform_3dof.toml"
+                                         : config.devices.model;
+  auto m = haptics::load_device_model(path);
+  if (!m) return m.error().with_context("peg-in-hole fingertip device model");
+  return std::shared_ptr<const haptics::FingertipDeviceModel>(std::move(*m));
+}
+
+PegWorld::PegWorld(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting, WorldPhase phase)
+    : config_(config),
+      layout_(layout),
+      setting_(setting),
+      phase_(phase),
+      hole_(hole_geometry(config, layout.p_hole_in_world)),
+      monitor_(config.peg.break_force_n, config.peg.break_filter_time_constant_s) {}
+
+Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config, const TrialLayout& layout,
+                                                   Setting setting, const HandModel& hand_model,
+                                                   std::shared_ptr<const haptics::FingertipDeviceModel> device_model,
+                                                   WorldPhase phase) {
+  if (Status s = config.validate(); !s) return s.error();
+  if (!device_model) return make_error(Errc::invalid_argument, "PegWorld needs a fingertip device model");
+  std::unique_ptr<PegWorld> w(new PegWorld(config, layout, setting, phase));
+  haptics::HapticScene scene = trial_scene(config, layout);
+  if (phase != WorldPhase::trial) {
+    // Familiarisation has no hole to finish in.
+    std::erase_if(scene.objects, [](const haptics::SceneObject& o) { return o.name == "hole_plate"; });
+  }
+  auto sim = haptics::ContactSimulation::create(hand_model, Handedness::right, scene);
+  if (!sim) return sim.error().with_context("peg-in-hole scene");
+  if (phase == WorldPhase::spring) {
+    const FamiliarisationOptions& f = config.familiarisation;
+    if (Status s = sim->place_object("peg", Pose{peg_spawn_pose(config, Vec3::Zero()).q,
+                                                 f.spring_anchor_m - Vec3(0, 0.5 * config.peg.length_m, 0)});
+        !s) {
+      return s.error();
+    }
+    if (Status s = sim->set_object_spring("peg", f.spring_anchor_m - Vec3(0, 0.5 * config.peg.length_m, 0),
+                                          f.spring_stiffness_n_per_m, f.spring_damping_ns_per_m);
+        !s) {
+      return s.error();
+    }
+  }
+  std::vector<haptics::ServoChannel> channels;
+  for (Finger f : config.devices.fingers) {
+    auto dev = haptics::EmulatedFingertip::create(device_model);
+    if (!dev) return dev.error().with_context("emulated fingertip device");
+    channels.push_back({f, device_model, std::shared_ptr<haptics::FingertipSink>(std::move(*dev))});
+  }
+  haptics::ServoLoopOptions so;
+  so.realtime_priority = false;
+  so.remove_finger_abduction = !setting.abduction;
+  so.haptics_enabled = setting.haptics;
+  auto loop = haptics::ServoLoop::create(std::move(*sim), std::move(channels), so);
+  if (!loop) return loop.error();
+  w->servo_ = std::move(*loop);
+  w->now_ns_ = 0;
+  w->start_ns_ = 0;
+  w->servo_->engage(0);
+  if (auto p = w->servo_->simulation().object_pose("peg")) w->peg_pose_ = *p;
+  return w;
+}
+
+void PegWorld::submit_hand(const Pose& T_world_wrist, const HandAngles& angles) {
+  servo_->submit_tracked_hand(now_ns_, T_world_wrist, angles);
+}
+
+double PegWorld::elapsed_s() const noexcept { return 1e-9 * static_cast<double>(now_ns_ - start_ns_); }
+
+std::array<float, 4> PegWorld::peg_rgba() const noexcept {
+  return peg_colour(monitor_.filtered_n(), config_.peg.colour_scale_max_n, monitor_.broken());
+}
+
+void PegWorld::respawn() {
+  haptics::ContactSimulation& sim = servo_->simulation();
+  if (phase_ == WorldPhase::spring) {
+    const Vec3 p = config_.familiarisation.spring_anchor_m - Vec3(0, 0.5 * config_.peg.length_m, 0);
+    (void)sim.place_object("peg", Pose{peg_spawn_pose(config_, Vec3::Zero()).q, p});
+  } else {
+    (void)sim.place_object("peg", peg_spawn_pose(config_, layout_.p_peg_start_in_world));
+  }
+  monitor_.reset();
+  ++respawns_;
+  idle_since_ns_ = -1;
+}
+
+PegEvent PegWorld::step() {
+  now_ns_ += kNsPerMillisecond;
+  servo_->tick(now_ns_);
+  if (const haptics::ServoSnapshot* s = servo_->latest()) snapshot_ = *s;
+  if (auto p = servo_->simulation().object_pose("peg")) peg_pose_ = *p;
+
+  const double force = grasp_force_n(snapshot_.contact);
+  if (std::isfinite(force)) {
+    peak_force_n_ = std::max(peak_force_n_, force);
+    if (force > 0.05) {
+      force_sum_ += force;
+      ++contact_ticks_;
+    }
+  }
+  PegEvent ev{PegEvent::Kind::none, now_ns_};
+  if (monitor_.broken()) {
+    if (1e-9 * static_cast<double>(now_ns_ - broken_at_ns_) >= config_.peg.respawn_delay_s) {
+      respawn();
+      ev.kind = PegEvent::Kind::respawned;
+    }
+    return ev;
+  }
+  if (monitor_.update(now_ns_, force)) {
+    ++breaks_;
+    broken_at_ns_ = now_ns_;
+    return {PegEvent::Kind::broke, now_ns_};
+  }
+  if (phase_ == WorldPhase::trial) {
+    insertion_ = insertion_state(peg_pose_, 0.5 * config_.peg.length_m, hole_);
+    if (insertion_.inserted && !inserted_) {
+      inserted_ = true;
+      return {PegEvent::Kind::inserted, now_ns_};
+    }
+  }
+  if (config_.peg.respawn_dropped && phase_ != WorldPhase::spring) {
+    // Fell off the table, or lies on it untouched for a second (a bottle on
+    // its side that the experimenter stands up again).
+    const double table = config_.layout.table_height_m;
+    const bool fell_off = peg_pose_.p.y() < table - 0.05;
+    const bool lying = std::abs(peg_axis(peg_pose_).y()) < 0.7 && peg_pose_.p.y() < table + config_.peg.radius_m + 0.01;
+    const bool untouched = force < 0.05;
+    if (lying && untouched && !insertion_.inserted) {
+      if (idle_since_ns_ < 0) idle_since_ns_ = now_ns_;
+    } else {
+      idle_since_ns_ = -1;
+    }
+    if (fell_off || (idle_since_ns_ >= 0 && now_ns_ - idle_since_ns_ > kNsPerSecond)) {
+      ++drops_;
+      respawn();
+      return {PegEvent::Kind::dropped, now_ns_};
+    }
+  }
+  return ev;
+}
+
+}  // namespace proprio::peg_in_hole

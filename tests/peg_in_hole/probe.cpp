@@ -1,0 +1,58 @@
+// Runs simulated trials and prints a trace (development aid).
+#include <cstdio>
+#include <cstdlib>
+#include "proprio/peg_in_hole/study_runner.hpp"
+using namespace proprio;
+using namespace proprio::peg_in_hole;
+int main(int argc, char** argv) {
+  const int setting = argc > 1 ? std::atoi(argv[1]) : 1;
+  const int trial = argc > 2 ? std::atoi(argv[2]) : 0;
+  const double limit = argc > 3 ? std::atof(argv[3]) : 30;
+  PegInHoleConfig c;
+  if (getenv("ABD")) { c.sim_user.index_abduction_rad = atof(getenv("ABD")); c.sim_user.middle_abduction_rad = -atof(getenv("ABD")); }
+  auto dev = load_device_model(c);
+  if (!dev) { std::printf("%s\n", dev.error().message.c_str()); return 1; }
+  auto shape = HandShape::from_measurements(c.sim_user.hand_length_m, c.sim_user.hand_width_m);
+  HandModel hand(*shape);
+  SimulatedUser user(c, hand, 7);
+  auto layout = trial_layout(c, 11, trial);
+  auto w = PegWorld::create(c, layout, setting_from_number(setting), hand, *dev);
+  if (!w) { std::printf("%s\n", w.error().message.c_str()); return 1; }
+  PegWorld& world = **w;
+  const Quat q(Eigen::AngleAxisd(-0.3, Vec3::UnitX()));
+  user.begin(0, Pose{q, layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)});
+  std::string last;
+  for (int t = 0; t < limit * 1000; ++t) {
+    Percept p;
+    const auto& s = world.snapshot();
+    p.time_ns = world.now_ns(); p.T_world_peg = world.peg_pose(); p.peg_rgba = world.peg_rgba();
+    p.T_world_proxy_wrist = s.proxy.joint(HandJoint::wrist);
+    for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.proxy.joint(tip_of(static_cast<Finger>(f))).p;
+    p.hole = world.hole();
+    for (std::size_t ch = 0; ch < s.channel_count; ++ch) {
+      auto fi = static_cast<std::size_t>(s.channels[ch].finger);
+      p.felt_normal_n[fi] = std::max(0.0, s.channels[ch].measured.normal_n);
+      p.felt_shear_n[fi] = s.channels[ch].measured.shear_magnitude_n();
+    }
+    auto cmd = user.act(p);
+    world.submit_hand(cmd.T_world_wrist, cmd.angles);
+    auto ev = world.step();
+    std::string ph(user.phase_name());
+    if (ph != last || t % 250 == 0 || ev.kind != PegEvent::Kind::none) {
+      const auto& pp = world.peg_pose();
+      Vec3 ax = peg_axis(pp);
+      auto ins = world.insertion();
+      std::printf("%6.3f s=%.2f %-8s ev%d peg(%.3f %.3f %.3f) ax(%.2f %.2f %.2f) wrist(%.3f %.3f %.3f) tips T%.2f I%.2f M%.2f felt %.2f %.2f %.2f filt %.2f ins d=%.3f r=%.4f\n",
+        1e-9*world.now_ns(), user.closure(), ph.c_str(), (int)ev.kind, pp.p.x(), pp.p.y(), pp.p.z(), ax.x(), ax.y(), ax.z(),
+        cmd.T_world_wrist.p.x(), cmd.T_world_wrist.p.y(), cmd.T_world_wrist.p.z(),
+        s.contact[0].normal_n, s.contact[1].normal_n, s.contact[2].normal_n,
+        p.felt_normal_n[0], p.felt_normal_n[1], p.felt_normal_n[2], world.filtered_grasp_force_n(), ins.depth_m, ins.radial_offset_m);
+      last = ph;
+      if (getenv("TIPS")) for (int f = 0; f < 3; ++f) {
+        Vec3 d = p.p_proxy_tip_in_world[f] - pp.p; Vec3 dr = d - d.dot(ax) * ax;
+        std::printf("      tip%d rel(%.3f %.3f %.3f) radial %.4f\n", f, d.x(), d.y(), d.z(), dr.norm());
+      }
+    }
+    if (ev.kind == PegEvent::Kind::inserted) { std::printf("INSERTED at %.2f s\n", world.elapsed_s()); break; }
+  }
+}

@@ -1,0 +1,111 @@
+// proprio run peg-in-hole --participant sim|ID: the thesis's peg-in-hole
+// haptic manipulation study (docs/peg-in-hole.md), with simulated
+// participants stepping simulated time, or with a real participant on the
+// engine (HMD, window or headless render).
+#include <fmt/format.h>
+
+#include <cctype>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+
+#include "commands.hpp"
+#include "proprio/peg_in_hole/live.hpp"
+#include "proprio/peg_in_hole/study_runner.hpp"
+#include "proprio/study/completion_time.hpp"
+#include "run_args.hpp"
+
+namespace proprio::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace proprio::peg_in_hole;
+
+int analyse_and_print(const fs::path& dir) {
+  auto a = study::analyze_completion_time_study(dir);
+  if (!a) return report_error(a.error());
+  auto files = study::write_completion_time_report(*a, dir / "report", "Peg-in-hole: normalised completion time");
+  if (!files) return report_error(files.error());
+  std::printf("\n%s\nReport in %s/report/: anova.txt, summary.json, normalised_times.csv, normalised_time.svg\n",
+              study::completion_time_text(*a).c_str(), dir.c_str());
+  return 0;
+}
+
+int run_simulated(const RunArgs& a, const PegInHoleConfig& config, const fs::path& out) {
+  SimulatedStudyOptions o;
+  o.out_dir = out;
+  o.participants = a.participants;
+  o.seed = a.seed_given ? a.seed : config.seed;
+  o.resume = a.resume;
+  o.force = a.force;
+  std::mutex print;
+  o.progress = [&](const std::string& line) {
+    std::lock_guard<std::mutex> lock(print);
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  };
+  std::printf("peg-in-hole, %d simulated participants, seed %llu: %s\n", o.participants,
+              static_cast<unsigned long long>(o.seed), config.describe().c_str());
+  auto r = run_simulated_study(config, o);
+  if (!r) return report_error(r.error());
+  std::printf("\n%d trials run (%d recovered from an earlier run) in %.1f s wall time, %.0f s simulated; servo: %llu "
+              "ticks, tick p50 %.0f us, p99 %.0f us, max %.0f us (stepped in simulated time, no sleeping)\n",
+              r->trials_run, r->trials_recovered, r->wall_s, r->simulated_s, static_cast<unsigned long long>(r->ticks),
+              r->tick_p50_us, r->tick_p99_us, r->tick_max_us);
+  return analyse_and_print(out);
+}
+
+}  // namespace
+
+int run_peg_in_hole(const RunArgs& a) {
+  PegInHoleConfig config;
+  if (!a.design.empty()) {
+    auto c = PegInHoleConfig::load_file(a.design);
+    if (!c) return report_error(c.error());
+    config = *c;
+  }
+  if (a.seed_given) config.seed = a.seed;
+  const fs::path out = a.out_given ? fs::path(a.out) : fs::path("peg-in-hole-data");
+  if (a.participant.empty()) {
+    return report_error(make_error(Errc::invalid_argument,
+                                   "peg-in-hole needs --participant: 'sim' (simulated participants) or the id of a "
+                                   "real participant (letters, digits, '_' and '-')"));
+  }
+  if (a.participant == "sim") return run_simulated(a, config, out);
+
+  // A real participant: the engine renders, the hand source and devices are
+  // the flags' (defaults for this study: thumb, index and middle on 3-DOF
+  // devices, unless --fingers/--device say otherwise).
+  RunArgs live = a;
+  if (live.fingers == std::vector<std::string>{"index"}) live.fingers = {"thumb", "index", "middle"};
+  if (live.device == std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml") {
+    live.device = config.devices.model.empty() ? std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/platform_3dof.toml"
+                                               : config.devices.model.string();
+  }
+  LiveRunner runner = [&live](engine::Scene scene, engine::AppInputs extra) -> Result<engine::AppReport> {
+    live.scene = scene.name;
+    auto options = app_options_from(live);
+    if (!options) return options.error();
+    options->frames = 0;  // until the trial ends
+    auto inputs = app_inputs_from(live, scene, *options);
+    if (!inputs) return inputs.error();
+    inputs->on_frame = std::move(extra.on_frame);
+    inputs->servo_options.remove_finger_abduction = extra.servo_options.remove_finger_abduction;
+    inputs->servo_options.haptics_enabled = extra.servo_options.haptics_enabled;
+    auto app = engine::App::create(std::move(scene), std::move(*inputs), *options);
+    if (!app) return app.error();
+    return run_app_until_done(**app);
+  };
+  LiveStudyOptions lo;
+  lo.out_dir = out;
+  lo.participant = a.participant;
+  lo.resume = a.resume;
+  lo.force = a.force;
+  lo.progress = [](const std::string& line) { std::printf("%s\n", line.c_str()); };
+  auto r = run_live_session(config, lo, runner);
+  if (!r) return report_error(r.error());
+  std::printf("\n%d trials recorded in %s\n", *r, out.c_str());
+  return 0;
+}
+
+}  // namespace proprio::cli

@@ -83,10 +83,16 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
   const auto limit_ticks = static_cast<std::int64_t>(std::llround(options.time_limit_s * 1000.0));
   TrialResult r;
   const HandModel& model = world.hand_model();
+  // Per-tick cost of the servo tick (simulation, gates, devices) measured
+  // here: ServoLoop only times its own thread, and this run has none.
+  std::vector<float> tick_us;
+  tick_us.reserve(static_cast<std::size_t>(std::min<std::int64_t>(limit_ticks, 200000)));
   for (std::int64_t tick = 0; tick < limit_ticks; ++tick) {
     const HandCommand cmd = user.act(perceive(world, config.devices.fingers));
     world.submit_hand(cmd.T_world_wrist, cmd.angles);
+    const auto t0 = std::chrono::steady_clock::now();
     const PegEvent ev = world.step();
+    tick_us.push_back(std::chrono::duration<float, std::micro>(std::chrono::steady_clock::now() - t0).count());
     if (rec && (tick % record_every == 0 || ev.kind != PegEvent::Kind::none)) {
       const HandPose tracked = model.forward(Handedness::right, cmd.angles, cmd.T_world_wrist, world.now_ns());
       Status st = rec->write(s_tracked, tracked);
@@ -110,6 +116,14 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
   r.peak_force_n = world.peak_force_n();
   r.mean_force_n = world.mean_force_n();
   r.timing = world.timing();
+  if (!tick_us.empty()) {
+    std::sort(tick_us.begin(), tick_us.end());
+    const auto at = [&](double q) { return static_cast<double>(tick_us[static_cast<std::size_t>(q * static_cast<double>(tick_us.size() - 1))]); };
+    r.timing.tick_p50_us = at(0.5);
+    r.timing.tick_p99_us = at(0.99);
+    r.timing.tick_max_us = tick_us.back();
+    r.timing.overruns = static_cast<std::uint64_t>(tick_us.end() - std::upper_bound(tick_us.begin(), tick_us.end(), 1000.0f));
+  }
   if (rec) {
     if (Status st = rec->write(s_events, Event{r.completed ? "done" : "time limit"}, world.now_ns()); !st) return st.error();
     if (Status st = rec->close(); !st) return st.error();

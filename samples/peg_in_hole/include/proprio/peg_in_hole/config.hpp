@@ -54,7 +54,7 @@ struct LayoutOptions {
 struct FamiliarisationOptions {
   double spring_phase_s = 180.0;  // touch and grasp a peg hanging on a spring
   double ground_phase_s = 180.0;  // lift and rotate it from the ground
-  Vec3 spring_anchor_m = Vec3(0.0, 1.05, -0.40);
+  Vec3 spring_anchor_m = Vec3(0.0, 1.15, -0.40);  // the peg top hangs here: ~9 cm above the table
   double spring_stiffness_n_per_m = 200.0;
   double spring_damping_ns_per_m = 5.0;
 };

@@ -1,0 +1,120 @@
+// Whole simulated peg-in-hole sessions: a SIGKILLed study resumes without
+// losing or repeating a trial, and the simulated user ranks the settings as
+// the thesis found (setting 1 fastest, setting 4 slowest).
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <set>
+#include <thread>
+
+#include "proprio/peg_in_hole/study_runner.hpp"
+#include "proprio/study/completion_time.hpp"
+#include "proprio/study/csv.hpp"
+
+using namespace proprio;
+using namespace proprio::peg_in_hole;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path fresh_dir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / fmt::format("proprio_{}_{}", name, ::getpid());
+  fs::remove_all(d);
+  return d;
+}
+
+int csv_rows(const fs::path& csv) {
+  auto t = study::read_csv(csv);
+  return t ? static_cast<int>(t->rows.size()) : 0;
+}
+
+}  // namespace
+
+TEST(PegStudy, ASigkilledStudyResumesWithNoTrialLostOrRepeated) {
+  PegInHoleConfig c;
+  c.familiarisation.spring_phase_s = 0;
+  c.familiarisation.ground_phase_s = 0;
+  c.main_task.trial_timeout_s = 1.5;  // short trials: this test is about the bookkeeping
+  c.recording.rate_hz = 50;
+  const fs::path dir = fresh_dir("peg_resume");
+  SimulatedStudyOptions o;
+  o.out_dir = dir;
+  o.participants = 1;
+  o.seed = 9;
+  o.threads = 1;
+  const fs::path csv = dir / "peg-in-hole_sim01_s1.csv";
+
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto r = run_simulated_study(c, o);
+    ::_exit(r ? 0 : 1);
+  }
+  // Kill it mid-study, once a few rows are on disk.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (csv_rows(csv) < 5 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ::kill(child, SIGKILL);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the child finished before it was killed";
+  const int before = csv_rows(csv);
+  ASSERT_GE(before, 5);
+  ASSERT_LT(before, 20);
+
+  auto refused = run_simulated_study(c, o);
+  EXPECT_FALSE(refused) << "existing data is neither overwritten nor resumed silently";
+  o.resume = true;
+  auto r = run_simulated_study(c, o);
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_EQ(r->trials_recovered, before);
+  EXPECT_EQ(r->trials_run, 20 - before);
+  auto t = study::read_csv(csv);
+  ASSERT_TRUE(t) << t.error().message;
+  ASSERT_EQ(t->rows.size(), 20u);
+  const auto trial = *t->require_column("trial");
+  std::set<std::string> seen;
+  for (const auto& row : t->rows) seen.insert(row[trial]);
+  EXPECT_EQ(seen.size(), 20u) << "every trial exactly once";
+  EXPECT_TRUE(fs::exists(dir / "recordings" / "sim01_trial20.prec"));
+  fs::remove_all(dir);
+}
+
+// The acceptance test of the simulated user: over several study seeds the
+// normalised completion time of setting 1 (wHF+wAA) is the lowest and that of
+// setting 4 (woHF+woAA) the highest.
+TEST(PegStudy, SimulatedUsersRankTheSettingsAsTheThesis) {
+  PegInHoleConfig c;
+  c.familiarisation.spring_phase_s = 5;
+  c.familiarisation.ground_phase_s = 5;
+  c.main_task.trial_timeout_s = 60;
+  c.recording.enabled = false;
+  for (std::uint64_t seed : {1u, 2u, 3u}) {
+    const fs::path dir = fresh_dir(fmt::format("peg_order_{}", seed));
+    SimulatedStudyOptions o;
+    o.out_dir = dir;
+    o.participants = 4;
+    o.seed = seed;
+    o.threads = 2;
+    auto r = run_simulated_study(c, o);
+    ASSERT_TRUE(r) << r.error().message;
+    auto a = study::analyze_completion_time_study(dir);
+    ASSERT_TRUE(a) << a.error().message;
+    ASSERT_EQ(a->summary.size(), 4u);
+    std::string line;
+    for (const auto& s : a->summary) line += fmt::format(" {}:{:.3f}", s.setting, s.mean);
+    for (std::size_t k = 1; k < 4; ++k) {
+      EXPECT_LT(a->summary[0].mean, a->summary[k].mean) << "seed " << seed << ":" << line;
+    }
+    for (std::size_t k = 0; k < 3; ++k) {
+      EXPECT_GT(a->summary[3].mean, a->summary[k].mean) << "seed " << seed << ":" << line;
+    }
+    fs::remove_all(dir);
+  }
+}

@@ -29,7 +29,7 @@ double ou(double x, double sigma, double tau, double dt, Rng& rng) {
 // The thumb is aimed this far into the peg, so it is already pressing when
 // the fingers close (otherwise they push a standing peg over before the
 // thumb takes the load).
-constexpr double kThumbPreload = 0.008;
+constexpr double kThumbPreload = 0.012;
 
 }  // namespace
 
@@ -51,9 +51,11 @@ HandAngles SimulatedUser::posture(double s) const {
   set(HandDof::thumb_cmc_abduction, 40);
   set(HandDof::thumb_mcp_flexion, 20);
   set(HandDof::thumb_ip_flexion, 15);
-  for (HandDof d : {HandDof::index_mcp_flexion, HandDof::middle_mcp_flexion}) set(d, 20 + 30 * s);
-  for (HandDof d : {HandDof::index_pip_flexion, HandDof::middle_pip_flexion}) set(d, 20 + 25 * s);
-  for (HandDof d : {HandDof::index_dip_flexion, HandDof::middle_dip_flexion}) set(d, 10 + 12 * s);
+  // Mostly at the MCP, so the pads (not the nails) face the thumb as the
+  // fingers close: about 90 degrees of total flexion at s = 1.
+  for (HandDof d : {HandDof::index_mcp_flexion, HandDof::middle_mcp_flexion}) set(d, 10 + 45 * s);
+  for (HandDof d : {HandDof::index_pip_flexion, HandDof::middle_pip_flexion}) set(d, 15 + 25 * s);
+  for (HandDof d : {HandDof::index_dip_flexion, HandDof::middle_dip_flexion}) set(d, 5 + 10 * s);
   // Ring and little stay curled out of the way.
   for (HandDof d : {HandDof::ring_mcp_flexion, HandDof::little_mcp_flexion}) set(d, 70);
   for (HandDof d : {HandDof::ring_pip_flexion, HandDof::little_pip_flexion}) set(d, 90);

@@ -54,12 +54,13 @@ int run(const RunArgs& a) {
   if (!a.participant.empty()) {
 #ifdef PROPRIO_HAVE_PERCEPTION_THRESHOLD
     if (a.scene == "perception-threshold") return run_perception_threshold(a);
+    if (a.scene == "hmd-calibration") return run_hmd_calibration(a);
 #endif
 #ifdef PROPRIO_HAVE_PEG_IN_HOLE
     if (a.scene == "peg-in-hole") return run_peg_in_hole(a);
 #endif
     return report_error(make_error(Errc::invalid_argument, "--participant runs a study sample built into this proprio (perception-threshold, "
-                                                           "peg-in-hole), not '" + a.scene + "'"));
+                                                           "hmd-calibration, peg-in-hole), not '" + a.scene + "'"));
   }
   return run_scene(a);
 }
@@ -207,12 +208,14 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--realtime", a->realtime, "headless: run on the wall clock instead of simulated time");
   cmd->add_flag("--no-hud", a->no_hud, "no text overlay");
   cmd->add_option("--participant", a->participant,
-                  "run the scene's study (perception-threshold, peg-in-hole): 'sim' for simulated participants, "
+                  "run the scene's study (perception-threshold, hmd-calibration, peg-in-hole): 'sim' for simulated participants, "
                   "or a real participant's id (its number sets the counterbalancing position: P07 is the 7th)");
   cmd->add_option("--participants", a->participants, "--participant sim: how many")->capture_default_str();
   cmd->add_option("--design", a->design, "the study's config file (default: the published protocol)");
   cmd->add_flag("--resume", a->resume, "continue the crashed session in --out at its next trial");
   cmd->add_flag("--force", a->force, "overwrite session data already in --out");
+  cmd->add_option("--calibration", a->calibration,
+                  "perception-threshold: the HMD calibration to apply (written by 'run hmd-calibration')");
   cmd->callback([a, &exit_code, out_option, seed_option] {
     a->out_given = out_option->count() > 0;
     a->seed_given = seed_option->count() > 0;

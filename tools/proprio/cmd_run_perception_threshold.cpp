@@ -8,9 +8,11 @@
 #include <filesystem>
 
 #include "commands.hpp"
+#include "proprio/core/random.hpp"
 #include "progress.hpp"
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
+#include "proprio/hmd_calibration/calibration.hpp"
 #include "proprio/perception_threshold/live.hpp"
 #include "proprio/perception_threshold/report.hpp"
 #include "proprio/perception_threshold/simulation.hpp"
@@ -110,8 +112,17 @@ int run_live(const RunArgs& a, const PerceptionProtocol& protocol, const study::
   so.participant_index = participant_index_of(a.participant);
   so.device_json = fmt::format(R"({{"fingertip_device": "{}", "hands": "{}", "output": "{}"}})",
                                channel ? channel->describe() : "none", a.hands.front(), to_string(o->output));
+  Pose T_hmd_graphics;
+  if (!a.calibration.empty()) {
+    auto c = hmd_calibration::load_calibration(a.calibration);
+    if (!c) return report_error(c.error());
+    T_hmd_graphics = *c;
+    so.calibration_json = fmt::format(R"J({{"file": "{}", "translation_m": [{}, {}, {}], "rotation_xyzw": [{}, {}, {}, {}]}})J",
+                                      a.calibration, c->p.x(), c->p.y(), c->p.z(), c->q.x(), c->q.y(), c->q.z(), c->q.w());
+  }
   auto experiment = LiveExperiment::create(protocol, design, so, std::move(channel));
   if (!experiment) return report_error(experiment.error());
+  (*experiment)->set_hmd_calibration(T_hmd_graphics);
   std::printf("%s\nParticipant %s (counterbalancing position %d): %d of %d trials done; data in %s\n",
               protocol.describe().c_str(), a.participant.c_str(), so.participant_index + 1,
               (*experiment)->completed_trials(), (*experiment)->planned_trials(), out.c_str());
@@ -127,7 +138,93 @@ int run_live(const RunArgs& a, const PerceptionProtocol& protocol, const study::
   return 0;
 }
 
+// The simulated participants' graphics frame: a few centimetres off the
+// tracked HMD frame and slightly pitched, the kind of offset the thesis found
+// (the rendering appeared too close).
+const Pose kSimulatedHmdGraphics{Quat(Eigen::AngleAxisd(2.0 * kPi / 180.0, Vec3::UnitX())), Vec3(0.005, -0.01, 0.04)};
+constexpr double kSimulatedReachSdM = 0.015;  // proprioceptive error per axis of one blind reach
+
+int calibrate_simulated(const RunArgs& a, const fs::path& out) {
+  std::vector<Vec3> cmd, finger;
+  for (int p = 0; p < a.participants; ++p) {
+    hmd_calibration::TargetOptions t;
+    t.seed = mix_seed(a.seed, static_cast<std::uint64_t>(p));
+    const auto targets = hmd_calibration::calibration_targets(t);
+    const auto reaches = hmd_calibration::simulate_reaching(kSimulatedHmdGraphics, targets, kSimulatedReachSdM,
+                                                            mix_seed(t.seed, 1));
+    cmd.insert(cmd.end(), targets.begin(), targets.end());
+    finger.insert(finger.end(), reaches.begin(), reaches.end());
+  }
+  auto fit = hmd_calibration::fit_hmd_graphics(cmd, finger);
+  if (!fit) return report_error(fit.error());
+  const Pose err = kSimulatedHmdGraphics.inverse() * fit->T_hmd_graphics;
+  std::printf("%d simulated participants x 100 blind reaches (proprioceptive error %.1f cm per axis)\n"
+              "fitted: %s\ntrue:   translation (%.1f, %.1f, %.1f) mm, 2.00 deg about x\n"
+              "error of the fit: %.2f mm, %.3f deg\n",
+              a.participants, kSimulatedReachSdM * 100, fit->describe().c_str(), kSimulatedHmdGraphics.p.x() * 1e3,
+              kSimulatedHmdGraphics.p.y() * 1e3, kSimulatedHmdGraphics.p.z() * 1e3, err.p.norm() * 1e3,
+              Eigen::AngleAxisd(err.q).angle() * 180 / kPi);
+  if (auto s = hmd_calibration::save_calibration(out, *fit); !s) return report_error(s.error());
+  std::printf("Saved to %s (use: proprio run perception-threshold --participant ID --calibration %s)\n", out.c_str(),
+              out.c_str());
+  return 0;
+}
+
+// A real participant: a grey sphere at each target, the finger not drawn;
+// Space records the fingertip where the participant believes the sphere is.
+int calibrate_live(const RunArgs& a, const fs::path& out) {
+  hmd_calibration::TargetOptions t;
+  t.seed = a.seed;
+  const auto targets = hmd_calibration::calibration_targets(t);
+  engine::Scene scene;
+  scene.name = "hmd-calibration";
+  auto o = app_options_from(a);
+  if (!o) return report_error(o.error());
+  o->hud = false;
+  RunArgs no_servo = a;
+  no_servo.haptics = "none";
+  auto in = app_inputs_from(no_servo, scene, *o);
+  if (!in) return report_error(in.error());
+  std::vector<Vec3> finger;
+  in->on_frame = [&](engine::FrameContext& f) {
+    f.show_hands = false;
+    if (finger.size() >= targets.size()) {
+      f.stop = true;
+      return;
+    }
+    const Vec3& p_cmd = targets[finger.size()];
+    f.markers.push_back({engine::FrameContext::Marker::Shape::sphere, Pose{Quat::Identity(), f.T_world_head * p_cmd},
+                         Vec3::Constant(0.01), {0.6f, 0.6f, 0.6f, 1.0f}});
+    const bool tracked = f.tracked && f.tracked->active;
+    f.prompt = fmt::format("Reach {} of {}: touch the grey sphere with your index fingertip, then press Space{}",
+                           finger.size() + 1, targets.size(), tracked ? "" : "\n(hand not tracked)");
+    for (const auto& k : f.keys) {
+      if (k == "space" && tracked) {
+        finger.push_back(f.T_world_head.inverse() * f.tracked->joint(HandJoint::index_tip).p);
+        break;
+      }
+    }
+  };
+  auto app = engine::App::create(scene, std::move(*in), *o);
+  if (!app) return report_error(app.error());
+  auto report = run_app_until_done(**app);
+  if (!report) return report_error(report.error());
+  std::vector<Vec3> cmd(targets.begin(), targets.begin() + static_cast<std::ptrdiff_t>(finger.size()));
+  auto fit = hmd_calibration::fit_hmd_graphics(cmd, finger);
+  if (!fit) return report_error(fit.error());
+  std::printf("%s\n", fit->describe().c_str());
+  if (auto s = hmd_calibration::save_calibration(out, *fit); !s) return report_error(s.error());
+  std::printf("Saved to %s\n", out.c_str());
+  return 0;
+}
+
 }  // namespace
+
+int run_hmd_calibration(const RunArgs& a) {
+  const fs::path out = a.out_given ? fs::path(a.out) : fs::path("hmd_calibration.toml");
+  if (a.participant == "sim") return calibrate_simulated(a, out);
+  return calibrate_live(a, out);
+}
 
 int run_perception_threshold(const RunArgs& a) {
   auto protocol = a.design.empty() ? Result<PerceptionProtocol>(PerceptionProtocol::defaults(PROPRIO_SOURCE_DIR))

@@ -41,6 +41,7 @@ struct RunArgs {
   std::string design;        // the sample's config file; empty: published defaults
   bool resume = false;       // continue a crashed session in --out
   bool force = false;        // overwrite existing session data
+  std::string calibration;   // an HMD calibration (proprio run hmd-calibration) applied to what is drawn
 };
 
 // The engine options the flags describe (output, size, frames, camera, ...).
@@ -57,6 +58,7 @@ Result<engine::AppReport> run_app_until_done(engine::App& app);
 
 // Study samples; each returns the process exit code.
 int run_perception_threshold(const RunArgs& a);
+int run_hmd_calibration(const RunArgs& a);
 int run_peg_in_hole(const RunArgs& a);
 
 }  // namespace proprio::cli

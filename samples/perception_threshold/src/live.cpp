@@ -132,6 +132,17 @@ void LiveExperiment::start_trial(TimeNs now) {
 }
 
 void LiveExperiment::on_frame(engine::FrameContext& f) {
+  on_frame_uncalibrated(f);
+  // Eq. 2.1: a point commanded at p_cmd appears at T_hmd_graphics * p_cmd
+  // (head frame), so command the inverse of where it should appear.
+  const Pose T_graphics_hmd = T_hmd_graphics_.inverse();
+  for (auto& m : f.markers) {
+    const Pose T_head_marker = f.T_world_head.inverse() * m.T_world_marker;
+    m.T_world_marker = f.T_world_head * (T_graphics_hmd * T_head_marker);
+  }
+}
+
+void LiveExperiment::on_frame_uncalibrated(engine::FrameContext& f) {
   const TimeNs now = f.time_ns;
   f.show_hands = false;  // the participant sees spheres, not a hand
   if (error_) {

@@ -37,6 +37,10 @@ class LiveExperiment {
                                                         std::unique_ptr<ForceChannel> channel);
   ~LiveExperiment();  // stops the force thread and zeroes the device
 
+  // The HMD calibration (hmd_calibration): the transform from the graphics
+  // frame to the HMD frame; markers are drawn where the participant sees
+  // them at the intended place. Identity by default.
+  void set_hmd_calibration(const Pose& T_hmd_graphics) { T_hmd_graphics_ = T_hmd_graphics; }
   // The engine's frame hook (AppInputs::on_frame).
   void on_frame(engine::FrameContext& frame);
   // The first error (a failed write ends the run), or success.
@@ -47,6 +51,7 @@ class LiveExperiment {
  private:
   LiveExperiment() = default;
   void force_loop();
+  void on_frame_uncalibrated(engine::FrameContext& frame);
   void start_trial(TimeNs now);
 
   enum class Stage { waiting_for_hand, familiarisation, trial, answering, done };
@@ -63,6 +68,7 @@ class LiveExperiment {
   std::optional<study::Session> session_;
   std::unique_ptr<ForceChannel> channel_;
   PlacedScene scene_;
+  Pose T_hmd_graphics_;
   Stage stage_ = Stage::waiting_for_hand;
   TimeNs stage_start_ns_ = 0;
   std::optional<study::Trial> trial_;

@@ -30,6 +30,9 @@ double ou(double x, double sigma, double tau, double dt, Rng& rng) {
 // the fingers close (otherwise they push a standing peg over before the
 // thumb takes the load).
 constexpr double kThumbPreload = 0.012;
+// Closure past contact is what squeezes (the joint servos pull toward targets
+// inside the peg); past 2 the pads roll off the peg instead of pressing.
+constexpr double kMaxClosure = 2.0;
 
 }  // namespace
 
@@ -231,7 +234,7 @@ void SimulatedUser::regulate_grip(const Percept& p, double dt) {
     else if (seen < grip_target_n_ - 1.2) s_ += 0.05;
     next_visual_check_ = now_ + static_cast<TimeNs>(o_.visual_reaction_s * 1e9);
   }
-  s_ = std::clamp(s_, s_open_, 2.0);
+  s_ = std::clamp(s_, s_open_, kMaxClosure);
 }
 
 HandCommand SimulatedUser::act(const Percept& p) {
@@ -313,7 +316,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
           stable_since_ = -1;
           next_visual_check_ = now_ + static_cast<TimeNs>(o_.visual_reaction_s * 1e9);
         }
-        if (s_ > 2.0) go(Phase::release);  // closed on nothing
+        if (s_ > kMaxClosure) go(Phase::release);  // closed on nothing
         break;
       }
       if (touch_missing_ && contact_felt(p)) touch_missing_ = false;  // it was felt after all
@@ -355,10 +358,6 @@ HandCommand SimulatedUser::act(const Percept& p) {
     case Phase::lift:
       regulate_grip(p, dt);
       if (now_ >= move_start_ + static_cast<TimeNs>(move_duration_s_ * 1e9)) {
-        if (config_.familiarisation.ground_phase_s >= 0 && grasp_only_) {
-          go(Phase::release);
-          break;
-        }
         // Pronate the held peg horizontal: its top swings toward the hole (+x).
         const Quat q(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitZ()));
         start_move(rotate_about(cmd_, q, peg.p), caution() * o_.rotate_duration_s);

@@ -18,3 +18,20 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::peg_in_hole)
   add_executable(peg_probe peg_in_hole/probe.cpp)
   target_link_libraries(peg_probe PRIVATE proprio::peg_in_hole proprio::options)
 endif()
+
+# The CLI end to end: a simulated study with its analysis (integration), and a
+# real-participant session rendered headless on lavapipe with the scripted
+# touch hand (render).
+if(PROPRIO_BUILD_TESTS AND TARGET proprio::peg_in_hole AND TARGET proprio)
+  set(_peg_out ${CMAKE_CURRENT_BINARY_DIR}/peg_in_hole_cli)
+  add_test(NAME peg_in_hole_cli.simulated_study
+    COMMAND proprio run peg-in-hole --participant sim --participants 2 --seed 4 --force
+            --design ${CMAKE_CURRENT_SOURCE_DIR}/peg_in_hole/quick.toml --out ${_peg_out}/sim)
+  set_tests_properties(peg_in_hole_cli.simulated_study PROPERTIES LABELS integration
+    PASS_REGULAR_EXPRESSION "RM-ANOVA \\(rounds.*Greenhouse-Geisser")
+  add_test(NAME peg_in_hole_cli.live_headless
+    COMMAND proprio run peg-in-hole --participant P01 --headless --software --size 320x180 --force
+            --design ${CMAKE_CURRENT_SOURCE_DIR}/peg_in_hole/quick.toml --out ${_peg_out}/live)
+  set_tests_properties(peg_in_hole_cli.live_headless PROPERTIES LABELS render
+    PASS_REGULAR_EXPRESSION "20 trials recorded")
+endif()

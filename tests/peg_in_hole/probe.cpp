@@ -48,6 +48,9 @@ int main(int argc, char** argv) {
         s.contact[0].normal_n, s.contact[1].normal_n, s.contact[2].normal_n,
         p.felt_normal_n[0], p.felt_normal_n[1], p.felt_normal_n[2], world.filtered_grasp_force_n(), ins.depth_m, ins.radial_offset_m);
       last = ph;
+      if (getenv("HF")) { Vec3 hf = world.servo().simulation().hand_force_on_object("peg"); std::printf("      hand->peg (%.2f %.2f %.2f) tip raw T%.2f I%.2f M%.2f cnt %d %d %d\n", hf.x(), hf.y(), hf.z(),
+        world.servo().simulation().fingertip(Finger::thumb).raw.normal_n, world.servo().simulation().fingertip(Finger::index).raw.normal_n, world.servo().simulation().fingertip(Finger::middle).raw.normal_n,
+        world.servo().simulation().fingertip(Finger::thumb).contact_count, world.servo().simulation().fingertip(Finger::index).contact_count, world.servo().simulation().fingertip(Finger::middle).contact_count); }
       if (getenv("TIPS")) for (int f = 0; f < 3; ++f) {
         Vec3 d = p.p_proxy_tip_in_world[f] - pp.p; Vec3 dr = d - d.dot(ax) * ax;
         std::printf("      tip%d rel(%.3f %.3f %.3f) radial %.4f\n", f, d.x(), d.y(), d.z(), dr.norm());

@@ -7,6 +7,7 @@
 #include <cctype>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 
 #include "commands.hpp"
@@ -86,7 +87,10 @@ int run_peg_in_hole(const RunArgs& a) {
     live.scene = scene.name;
     auto options = app_options_from(live);
     if (!options) return options.error();
-    options->frames = 0;  // until the trial ends
+    // Until the trial's frame hook stops it (headless counts frames, so give
+    // it more than any trial needs); the study folder is for data, not PNGs.
+    options->frames = options->output == engine::OutputMode::headless ? std::numeric_limits<int>::max() / 2 : 0;
+    options->out_dir.clear();
     auto inputs = app_inputs_from(live, scene, *options);
     if (!inputs) return inputs.error();
     inputs->on_frame = std::move(extra.on_frame);

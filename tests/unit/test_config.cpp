@@ -16,6 +16,15 @@ Config parse_ok(std::string_view text) {
 bool contains(const std::string& haystack, std::string_view needle) {
   return haystack.find(needle) != std::string::npos;
 }
+TEST(Config, CheckKeysNamesTheUnknownKeyItsPlaceAndTheAllowedOnes) {
+  const Config c = parse_ok("a = 1\n[rig]\nfx = 640\nfy = 1\n");
+  EXPECT_TRUE(c.check_keys("top level", {"a", "rig"}));
+  auto bad = c.table("rig")->check_keys("rig", {"fx"});
+  ASSERT_FALSE(bad);
+  EXPECT_EQ(bad.error().code, Errc::invalid_argument);
+  EXPECT_EQ(bad.error().message, "test.toml:4:6: unknown key 'fy' in [rig]; known keys: fx");
+}
+
 }  // namespace
 
 TEST(Config, ReadsTypedValuesAndNestedKeys) {

@@ -239,6 +239,18 @@ std::vector<std::string> Config::keys() const {
   return out;
 }
 
+Status Config::check_keys(std::string_view table, const std::set<std::string>& known) const {
+  for (const std::string& k : keys()) {
+    if (known.count(k) == 0) {
+      std::string list;
+      for (const std::string& n : known) list += (list.empty() ? "" : ", ") + n;
+      return make_error(Errc::invalid_argument, where(k) + ": unknown key '" + k + "' in [" + std::string(table) +
+                                                    "]; known keys: " + list);
+    }
+  }
+  return Status::success();
+}
+
 const std::string& Config::source_name() const noexcept { return impl_->source; }
 
 std::string Config::where(std::string_view key) const { return where_in(*impl_, find(*impl_, key)); }

@@ -26,18 +26,6 @@ Error config_error(const Config& c, const std::string& key, const std::string& w
   return make_error(Errc::invalid_argument, fmt::format("{}: {}: {}", c.where(key), key, what));
 }
 
-// A typo'd key must not pass silently: every key has to be one we know.
-Status only_known_keys(const Config& c, const std::string& table, const std::set<std::string>& known) {
-  for (const std::string& k : c.keys()) {
-    if (known.count(k) == 0) {
-      std::string list;
-      for (const std::string& n : known) list += (list.empty() ? "" : ", ") + n;
-      return make_error(Errc::invalid_argument,
-                        fmt::format("{}: unknown key '{}' in [{}]; known keys: {}", c.where(k), k, table, list));
-    }
-  }
-  return Status::success();
-}
 
 bool is_identifier(const std::string& s) {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](char ch) {
@@ -216,7 +204,7 @@ Result<StudyDesign> StudyDesign::load_file(const std::filesystem::path& path) {
 
 Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::string& source_name) {
   STUDY_TRY(root, Config::parse(toml_text, source_name));
-  if (Status s = only_known_keys(root, "top level", {"study", "factor", "blocks", "procedure", "analysis"}); !s) {
+  if (Status s = root.check_keys("top level", {"study", "factor", "blocks", "procedure", "analysis"}); !s) {
     return s.error();
   }
   StudyDesign d;
@@ -224,7 +212,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
   d.source_name = source_name;
 
   STUDY_TRY(study, root.table("study"));
-  if (Status s = only_known_keys(study, "study", {"name", "kind", "description", "seed", "stimulus",
+  if (Status s = study.check_keys("study", {"name", "kind", "description", "seed", "stimulus",
                                                   "stimulus_unit", "response", "extra_columns"});
       !s) {
     return s.error();
@@ -257,7 +245,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
   if (root.contains("factor")) {
     STUDY_TRY(factors, root.tables("factor"));
     for (const Config& f : factors) {
-      if (Status s = only_known_keys(f, "[factor]", {"name", "levels"}); !s) return s.error();
+      if (Status s = f.check_keys("[factor]", {"name", "levels"}); !s) return s.error();
       STUDY_TRY(fname, f.get_string("name"));
       auto levels = f.get_strings("levels");
       if (!levels) {
@@ -281,7 +269,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
 
   if (root.contains("blocks")) {
     STUDY_TRY(blocks, root.table("blocks"));
-    if (Status s = only_known_keys(blocks, "blocks", {"by", "counterbalance", "group"}); !s) return s.error();
+    if (Status s = blocks.check_keys("blocks", {"by", "counterbalance", "group"}); !s) return s.error();
     STUDY_TRY(by, blocks.get_string("by"));
     const auto factor = std::find_if(d.factors.begin(), d.factors.end(), [&](const Factor& f) { return f.name == by; });
     if (factor == d.factors.end()) {
@@ -292,7 +280,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
       STUDY_TRY(groups, blocks.tables("group"));
       std::set<std::string> used;
       for (const Config& g : groups) {
-        if (Status s = only_known_keys(g, "[blocks.group]", {"name", "levels"}); !s) return s.error();
+        if (Status s = g.check_keys("[blocks.group]", {"name", "levels"}); !s) return s.error();
         STUDY_TRY(gname, g.get_string("name"));
         STUDY_TRY(glevels, g.get_strings("levels"));
         for (const std::string& l : glevels) {
@@ -327,7 +315,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
   ProcedureDesign& pd = d.procedure;
   const std::string where = proc.where("type");
   if (type == "constant") {
-    if (Status s = only_known_keys(proc, "procedure", {"type", "levels", "repetitions"}); !s) return s.error();
+    if (Status s = proc.check_keys("procedure", {"type", "levels", "repetitions"}); !s) return s.error();
     pd.kind = ProcedureKind::constant_stimuli;
     STUDY_TRY(levels, proc.get_doubles("levels"));
     if (levels.empty()) return config_error(proc, "levels", "needs at least one stimulus level");
@@ -347,7 +335,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
     }
     if (type == "staircase" || type == "weighted-staircase") {
       const bool weighted = type == "weighted-staircase";
-      if (Status s = only_known_keys(proc, "procedure",
+      if (Status s = proc.check_keys("procedure",
                                      {"type", "start", "starts", "interleave", "up", "down", "step", "steps",
                                       "step_scale", "min", "max", "trials", "reversals", "discard_reversals",
                                       "target"});
@@ -369,7 +357,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
         if (Status s = validate(check, where); !s) return s.error();
       }
     } else if (type == "quest") {
-      if (Status s = only_known_keys(proc, "procedure",
+      if (Status s = proc.check_keys("procedure",
                                      {"type", "starts", "interleave", "model", "beta", "guess", "lapse", "target",
                                       "prior_mean", "prior_sd", "min", "max", "grid_points", "trials", "stop_sd"});
           !s) {
@@ -380,7 +368,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
       if (Status s = validate(q, where); !s) return s.error();
       pd.quest = q;
     } else if (type == "psi") {
-      if (Status s = only_known_keys(proc, "procedure",
+      if (Status s = proc.check_keys("procedure",
                                      {"type", "interleave", "model", "guess", "target", "trials", "alpha",
                                       "alpha_min", "alpha_max", "alpha_points", "alpha_log", "beta", "beta_min",
                                       "beta_max", "beta_points", "beta_log", "stimulus", "stimulus_min",
@@ -402,7 +390,7 @@ Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::
 
   if (root.contains("analysis")) {
     STUDY_TRY(a, root.table("analysis"));
-    if (Status s = only_known_keys(a, "analysis", {"model", "guess", "lapse", "lapse_max", "threshold"}); !s) {
+    if (Status s = a.check_keys("analysis", {"model", "guess", "lapse", "lapse_max", "threshold"}); !s) {
       return s.error();
     }
     STUDY_TRY(model_name, a.get_string_or("model", "weibull"));

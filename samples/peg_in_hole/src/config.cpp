@@ -19,17 +19,6 @@ namespace {
   if (!var##_result) return var##_result.error(); \
   auto var = std::move(*var##_result)
 
-Status only_known(const Config& c, const std::string& table, const std::set<std::string>& known) {
-  for (const std::string& k : c.keys()) {
-    if (known.count(k) == 0) {
-      std::string list;
-      for (const std::string& n : known) list += (list.empty() ? "" : ", ") + n;
-      return make_error(Errc::parse_error,
-                        fmt::format("{}: unknown key '{}' in [{}]; known keys: {}", c.where(k), k, table, list));
-    }
-  }
-  return {};
-}
 
 Status read_double(const Config& c, const char* key, double& value, double lo, double hi) {
   auto v = c.get_double_or(key, value, lo, hi);
@@ -146,7 +135,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   if (!root_r) return root_r.error();
   const Config& root = *root_r;
   PegInHoleConfig out;
-  PEG_CHECK(only_known(root, "top level", {"study", "peg", "hole", "layout", "familiarisation", "main_task", "devices",
+  PEG_CHECK(root.check_keys("top level", {"study", "peg", "hole", "layout", "familiarisation", "main_task", "devices",
                                            "recording", "sim_user"}));
   const auto sub = [&](const char* name) -> Result<std::optional<Config>> {
     if (!root.contains(name)) return std::optional<Config>{};
@@ -157,7 +146,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("study"));
     if (t) {
-      PEG_CHECK(only_known(*t, "study", {"name", "seed"}));
+      PEG_CHECK(t->check_keys("study", {"name", "seed"}));
       PEG_TRY(name, t->get_string_or("name", out.name));
       out.name = name;
       PEG_TRY(seed, t->get_int_or("seed", 1, 0, std::numeric_limits<std::int64_t>::max()));
@@ -167,7 +156,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("peg"));
     if (t) {
-      PEG_CHECK(only_known(*t, "peg", {"radius_m", "length_m", "mass_kg", "friction", "break_force_n",
+      PEG_CHECK(t->check_keys("peg", {"radius_m", "length_m", "mass_kg", "friction", "break_force_n",
                                         "break_filter_time_constant_s", "colour_scale_max_n", "respawn_delay_s",
                                         "respawn_dropped"}));
       PegOptions& p = out.peg;
@@ -186,7 +175,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("hole"));
     if (t) {
-      PEG_CHECK(only_known(*t, "hole", {"clearance_m", "plate_thickness_m", "insertion_depth_m"}));
+      PEG_CHECK(t->check_keys("hole", {"clearance_m", "plate_thickness_m", "insertion_depth_m"}));
       PEG_CHECK(read_double(*t, "clearance_m", out.hole.clearance_m, 1e-5, 0.05));
       PEG_CHECK(read_double(*t, "plate_thickness_m", out.hole.plate_thickness_m, 0.005, 0.3));
       PEG_CHECK(read_double(*t, "insertion_depth_m", out.hole.insertion_depth_m, 0.001, 0.3));
@@ -195,7 +184,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("layout"));
     if (t) {
-      PEG_CHECK(only_known(*t, "layout", {"table_height_m", "peg_start_m", "peg_start_range_m", "hole_m", "hole_range_m"}));
+      PEG_CHECK(t->check_keys("layout", {"table_height_m", "peg_start_m", "peg_start_range_m", "hole_m", "hole_range_m"}));
       PEG_CHECK(read_double(*t, "table_height_m", out.layout.table_height_m, 0.0, 2.0));
       PEG_CHECK(read_vec3(*t, "peg_start_m", out.layout.peg_start_m));
       PEG_CHECK(read_vec3(*t, "peg_start_range_m", out.layout.peg_start_range_m));
@@ -206,7 +195,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("familiarisation"));
     if (t) {
-      PEG_CHECK(only_known(*t, "familiarisation", {"spring_phase_s", "ground_phase_s", "spring_anchor_m",
+      PEG_CHECK(t->check_keys("familiarisation", {"spring_phase_s", "ground_phase_s", "spring_anchor_m",
                                                     "spring_stiffness_n_per_m", "spring_damping_ns_per_m"}));
       FamiliarisationOptions& f = out.familiarisation;
       PEG_CHECK(read_double(*t, "spring_phase_s", f.spring_phase_s, 0.0, 3600.0));
@@ -219,7 +208,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("main_task"));
     if (t) {
-      PEG_CHECK(only_known(*t, "main_task", {"repetitions", "familiarisation_trials", "trial_timeout_s"}));
+      PEG_CHECK(t->check_keys("main_task", {"repetitions", "familiarisation_trials", "trial_timeout_s"}));
       PEG_TRY(reps, t->get_int_or("repetitions", out.main_task.repetitions, 1, 100));
       out.main_task.repetitions = static_cast<int>(reps);
       PEG_TRY(fam, t->get_int_or("familiarisation_trials", out.main_task.familiarisation_trials, 0, 400));
@@ -230,7 +219,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("devices"));
     if (t) {
-      PEG_CHECK(only_known(*t, "devices", {"fingers", "model"}));
+      PEG_CHECK(t->check_keys("devices", {"fingers", "model"}));
       if (t->contains("fingers")) {
         PEG_TRY(names, t->get_strings("fingers"));
         out.devices.fingers.clear();
@@ -247,7 +236,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("recording"));
     if (t) {
-      PEG_CHECK(only_known(*t, "recording", {"enabled", "rate_hz"}));
+      PEG_CHECK(t->check_keys("recording", {"enabled", "rate_hz"}));
       PEG_TRY(en, t->get_bool_or("enabled", out.recording.enabled));
       out.recording.enabled = en;
       PEG_CHECK(read_double(*t, "rate_hz", out.recording.rate_hz, 0.1, 1000.0));
@@ -289,7 +278,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
       };
       std::set<std::string> known;
       for (const Field& f : fields) known.insert(f.key);
-      PEG_CHECK(only_known(*t, "sim_user", known));
+      PEG_CHECK(t->check_keys("sim_user", known));
       for (const Field& f : fields) PEG_CHECK(read_double(*t, f.key, *f.value, f.lo, f.hi));
     }
   }

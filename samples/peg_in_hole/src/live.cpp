@@ -178,25 +178,9 @@ Result<int> run_live_session(const PegInHoleConfig& config, const LiveStudyOptio
     auto r = run_one(config, layout, setting, "Pick up the peg with your fingertips and insert it into the hole",
                      config.main_task.trial_timeout_s, true, false, run);
     if (!r) return r.error();
-    study::Response resp;
-    resp.correct = r->inserted;
-    resp.response_time_s = r->time_s;
-    auto& e = resp.extra;
-    e["setting"] = std::to_string(setting.number());
-    e["setting_label"] = setting.label();
-    e["familiarisation"] = trial->index < config.main_task.familiarisation_trials ? "1" : "0";
-    e["completion_time_s"] = fmt::format("{:.3f}", r->time_s);
-    e["timed_out"] = r->inserted ? "0" : "1";
-    e["breaks"] = std::to_string(r->breaks);
-    e["drops"] = "0";
-    e["peak_force_n"] = fmt::format("{:.3f}", r->peak);
-    e["mean_force_n"] = fmt::format("{:.3f}", r->mean);
-    e["peg_start_x_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.x());
-    e["peg_start_z_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.z());
-    e["hole_y_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.y());
-    e["hole_z_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.z());
-    e["recording"] = "";
-    e["participant_kind"] = "real";
+    const study::Response resp = trial_response(
+        config, trial->index, setting, layout,
+        {r->inserted, r->time_s, r->breaks, 0, r->peak, r->mean, "", "real"});
     if (Status st = session->record(*trial, resp); !st) return st.error();
     ++recorded;
     say(fmt::format("  {:.1f} s{}, {} breaks", r->time_s, r->inserted ? "" : " (timed out)", r->breaks));

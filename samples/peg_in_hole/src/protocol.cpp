@@ -110,4 +110,28 @@ haptics::HapticScene trial_scene(const PegInHoleConfig& c, const TrialLayout& la
   return scene;
 }
 
+study::Response trial_response(const PegInHoleConfig& config, int trial_index, const Setting& setting,
+                               const TrialLayout& layout, const TrialMeasures& m) {
+  study::Response resp;
+  resp.correct = m.completed;
+  resp.response_time_s = m.time_s;
+  auto& e = resp.extra;
+  e["setting"] = std::to_string(setting.number());
+  e["setting_label"] = setting.label();
+  e["familiarisation"] = trial_index < config.main_task.familiarisation_trials ? "1" : "0";
+  e["completion_time_s"] = fmt::format("{:.3f}", m.time_s);
+  e["timed_out"] = m.completed ? "0" : "1";
+  e["breaks"] = std::to_string(m.breaks);
+  e["drops"] = std::to_string(m.drops);
+  e["peak_force_n"] = fmt::format("{:.3f}", m.peak_force_n);
+  e["mean_force_n"] = fmt::format("{:.3f}", m.mean_force_n);
+  e["peg_start_x_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.x());
+  e["peg_start_z_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.z());
+  e["hole_y_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.y());
+  e["hole_z_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.z());
+  e["recording"] = m.recording;
+  e["participant_kind"] = m.participant_kind;
+  return resp;
+}
+
 }  // namespace proprio::peg_in_hole

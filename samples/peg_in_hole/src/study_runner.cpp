@@ -216,25 +216,10 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
     }
     auto r = run_simulated_trial(config, layout, setting, user, hand, device, to);
     if (!r) return r.error();
-    study::Response resp;
-    resp.correct = r->completed;
-    resp.response_time_s = r->completion_time_s;
-    auto& e = resp.extra;
-    e["setting"] = std::to_string(setting.number());
-    e["setting_label"] = setting.label();
-    e["familiarisation"] = trial->index < config.main_task.familiarisation_trials ? "1" : "0";
-    e["completion_time_s"] = fmt::format("{:.3f}", r->completion_time_s);
-    e["timed_out"] = r->completed ? "0" : "1";
-    e["breaks"] = std::to_string(r->breaks);
-    e["drops"] = std::to_string(r->drops);
-    e["peak_force_n"] = fmt::format("{:.3f}", r->peak_force_n);
-    e["mean_force_n"] = fmt::format("{:.3f}", r->mean_force_n);
-    e["peg_start_x_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.x());
-    e["peg_start_z_m"] = fmt::format("{:.4f}", layout.p_peg_start_in_world.z());
-    e["hole_y_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.y());
-    e["hole_z_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.z());
-    e["recording"] = config.recording.enabled ? "recordings/" + rec_name : "";
-    e["participant_kind"] = "simulated";
+    const study::Response resp = trial_response(
+        config, trial->index, setting, layout,
+        {r->completed, r->completion_time_s, r->breaks, r->drops, r->peak_force_n, r->mean_force_n,
+         config.recording.enabled ? "recordings/" + rec_name : "", "simulated"});
     if (Status st = session->record(*trial, resp); !st) return st;
     accumulate(shared, *r);
     if (options.progress) {

@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <cmath>
-#include <set>
 
 #include "proprio/core/config.hpp"
 
@@ -13,18 +12,6 @@ namespace {
 constexpr double kDegToRad = kPi / 180.0;
 // Sub-streams of a participant's seed (the study library uses stream 1 for its plan).
 constexpr std::uint64_t kPresentationStream = 1000;
-
-Status only_known_keys(const Config& c, const std::string& table, const std::set<std::string>& known) {
-  for (const std::string& k : c.keys()) {
-    if (known.count(k) == 0) {
-      std::string list;
-      for (const std::string& n : known) list += (list.empty() ? "" : ", ") + n;
-      return make_error(Errc::invalid_argument,
-                        fmt::format("{}: unknown key '{}' in [{}]; known keys: {}", c.where(k), k, table, list));
-    }
-  }
-  return {};
-}
 
 Status positive(double v, const char* name) {
   if (!(std::isfinite(v) && v > 0.0)) {
@@ -120,7 +107,7 @@ PerceptionProtocol PerceptionProtocol::defaults(const std::filesystem::path& sou
 Result<PerceptionProtocol> PerceptionProtocol::load_file(const std::filesystem::path& path) {
   auto c = Config::load_file(path);
   if (!c) return c.error();
-  if (auto s = only_known_keys(*c, "top level", {"design", "scene", "phases", "haptics", "observer"}); !s) {
+  if (auto s = c->check_keys("top level", {"design", "scene", "phases", "haptics", "observer"}); !s) {
     return s.error();
   }
   PerceptionProtocol p;
@@ -138,7 +125,7 @@ Result<PerceptionProtocol> PerceptionProtocol::load_file(const std::filesystem::
   if (c->contains("scene")) {
     auto t = c->table("scene");
     if (!t) return t.error();
-    if (auto s = only_known_keys(*t, "scene", {"fingertip_radius_cm", "cylinder_radius_cm", "cylinder_length_cm",
+    if (auto s = t->check_keys("scene", {"fingertip_radius_cm", "cylinder_radius_cm", "cylinder_length_cm",
                                                "cylinder_r_cm", "cylinder_azimuth_deg", "cylinder_elevation_deg"});
         !s) {
       return s.error();
@@ -155,7 +142,7 @@ Result<PerceptionProtocol> PerceptionProtocol::load_file(const std::filesystem::
   if (c->contains("phases")) {
     auto t = c->table("phases");
     if (!t) return t.error();
-    if (auto s = only_known_keys(*t, "phases", {"familiarisation_s", "adaptation_s", "blind_s", "cue_update_s",
+    if (auto s = t->check_keys("phases", {"familiarisation_s", "adaptation_s", "blind_s", "cue_update_s",
                                                 "cue_dead_zone_deg"});
         !s) {
       return s.error();
@@ -170,7 +157,7 @@ Result<PerceptionProtocol> PerceptionProtocol::load_file(const std::filesystem::
   if (c->contains("haptics")) {
     auto t = c->table("haptics");
     if (!t) return t.error();
-    if (auto s = only_known_keys(*t, "haptics", {"onset_force_n", "stiffness_n_per_cm", "max_force_n"}); !s) {
+    if (auto s = t->check_keys("haptics", {"onset_force_n", "stiffness_n_per_cm", "max_force_n"}); !s) {
       return s.error();
     }
     for (auto s : {read(*t, "onset_force_n", p.onset_force_n, 0, 10, 1),
@@ -182,7 +169,7 @@ Result<PerceptionProtocol> PerceptionProtocol::load_file(const std::filesystem::
   if (c->contains("observer")) {
     auto t = c->table("observer");
     if (!t) return t.error();
-    if (auto s = only_known_keys(*t, "observer", {"proprioceptive_noise_cm", "decision_noise", "haptic_weight",
+    if (auto s = t->check_keys("observer", {"proprioceptive_noise_cm", "decision_noise", "haptic_weight",
                                                   "haptic_noise", "lapse", "between_participant_sd", "motor_noise_cm"});
         !s) {
       return s.error();

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -43,6 +44,10 @@ class Config {
   Result<std::vector<Config>> tables(std::string_view key) const;
   // Keys directly under this table, in file order.
   std::vector<std::string> keys() const;
+  // A typo'd key must not pass silently: an error naming the first key that is
+  // not in `known`, where it is, and the keys that are allowed. `table` names
+  // the table in the message ("top level", "study", ...).
+  Status check_keys(std::string_view table, const std::set<std::string>& known) const;
 
   const std::string& source_name() const noexcept;
   // "file:line:col" of a key (dotted, relative to this table), or just the

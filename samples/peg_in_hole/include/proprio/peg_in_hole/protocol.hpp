@@ -10,6 +10,7 @@
 #include "proprio/haptics/scene.hpp"
 #include "proprio/peg_in_hole/config.hpp"
 #include "proprio/study/design.hpp"
+#include "proprio/study/session.hpp"
 
 namespace proprio::peg_in_hole {
 
@@ -30,6 +31,19 @@ struct TrialLayout {
 };
 // Trial `trial_index` of the participant whose session seed is participant_seed.
 TrialLayout trial_layout(const PegInHoleConfig& config, std::uint64_t participant_seed, int trial_index);
+
+// What a finished trial measured, live or simulated.
+struct TrialMeasures {
+  bool completed = false;   // inserted before the timeout
+  double time_s = 0.0;      // clock running through breaks
+  int breaks = 0, drops = 0;
+  double peak_force_n = 0.0, mean_force_n = 0.0;
+  std::string recording;    // relative path of the trial's .prec, or empty
+  std::string participant_kind;  // "real" or "simulated"
+};
+// The trial's CSV row (trial_columns()).
+study::Response trial_response(const PegInHoleConfig& config, int trial_index, const Setting& setting,
+                               const TrialLayout& layout, const TrialMeasures& m);
 
 // The haptic scene of a trial: table, upright peg at its start, the plate
 // with the hole. The peg's pose for a (re)spawn:

@@ -17,7 +17,9 @@
 #include "run_args.hpp"
 
 namespace proprio::cli {
-namespace {
+// Named, not anonymous: the CLI is a unity build, and the sibling study
+// commands define helpers with the same names.
+namespace peg_run {
 
 namespace fs = std::filesystem;
 using namespace proprio::peg_in_hole;
@@ -56,9 +58,7 @@ int run_simulated(const RunArgs& a, const PegInHoleConfig& config, const fs::pat
   return analyse_and_print(out);
 }
 
-}  // namespace
-
-int run_peg_in_hole(const RunArgs& a) {
+int run_peg_in_hole_impl(const RunArgs& a) {
   PegInHoleConfig config;
   if (!a.design.empty()) {
     auto c = PegInHoleConfig::load_file(a.design);
@@ -111,5 +111,9 @@ int run_peg_in_hole(const RunArgs& a) {
   std::printf("\n%d trials recorded in %s\n", *r, out.c_str());
   return 0;
 }
+
+}  // namespace peg_run
+
+int run_peg_in_hole(const RunArgs& a) { return peg_run::run_peg_in_hole_impl(a); }
 
 }  // namespace proprio::cli

@@ -19,7 +19,9 @@
 #include "run_args.hpp"
 
 namespace proprio::cli {
-namespace {
+// Named, not anonymous: the CLI is a unity build, and the sibling study
+// commands define helpers with the same names.
+namespace perception_run {
 
 namespace fs = std::filesystem;
 using namespace proprio::perception;
@@ -218,15 +220,13 @@ int calibrate_live(const RunArgs& a, const fs::path& out) {
   return 0;
 }
 
-}  // namespace
-
-int run_hmd_calibration(const RunArgs& a) {
+int run_hmd_calibration_impl(const RunArgs& a) {
   const fs::path out = a.out_given ? fs::path(a.out) : fs::path("hmd_calibration.toml");
   if (a.participant == "sim") return calibrate_simulated(a, out);
   return calibrate_live(a, out);
 }
 
-int run_perception_threshold(const RunArgs& a) {
+int run_perception_threshold_impl(const RunArgs& a) {
   auto protocol = a.design.empty() ? Result<PerceptionProtocol>(PerceptionProtocol::defaults(PROPRIO_SOURCE_DIR))
                                    : PerceptionProtocol::load_file(a.design);
   if (!protocol) return report_error(protocol.error());
@@ -236,5 +236,10 @@ int run_perception_threshold(const RunArgs& a) {
   if (a.participant == "sim") return run_simulated(a, *protocol, *design, out);
   return run_live(a, *protocol, *design, out);
 }
+
+}  // namespace perception_run
+
+int run_hmd_calibration(const RunArgs& a) { return perception_run::run_hmd_calibration_impl(a); }
+int run_perception_threshold(const RunArgs& a) { return perception_run::run_perception_threshold_impl(a); }
 
 }  // namespace proprio::cli

@@ -123,6 +123,12 @@ TEST(PegConfig, TomlOverridesAndClearErrors) {
   EXPECT_DOUBLE_EQ(c->hole.clearance_m, 0.001);
   EXPECT_EQ(c->main_task.repetitions, 2);
   EXPECT_EQ(c->devices.fingers.size(), 2u);
+  EXPECT_DOUBLE_EQ(c->devices.finger_joint_stiffness_nm_per_rad, 2.5);
+  auto stiff = PegInHoleConfig::parse("[devices]\nfinger_joint_stiffness_nm_per_rad = 1.5\n[sim_user]\nfelt_ceiling_n = 0.9\n");
+  ASSERT_TRUE(stiff) << stiff.error().message;
+  EXPECT_DOUBLE_EQ(stiff->devices.finger_joint_stiffness_nm_per_rad, 1.5);
+  EXPECT_DOUBLE_EQ(stiff->sim_user.felt_ceiling_n, 0.9);
+  EXPECT_FALSE(PegInHoleConfig::parse("[devices]\nfinger_joint_stiffness_nm_per_rad = 0\n"));
   auto unknown = PegInHoleConfig::parse("[peg]\nradius = 0.02\n", "t.toml");
   ASSERT_FALSE(unknown);
   EXPECT_NE(unknown.error().message.find("radius_m"), std::string::npos) << unknown.error().message;

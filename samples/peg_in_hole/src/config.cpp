@@ -113,11 +113,12 @@ Status PegInHoleConfig::validate() const {
 std::string PegInHoleConfig::describe() const {
   return fmt::format(
       "peg r={:.2f} mm, h={:.1f} mm, {:.0f} g, breaks at {:.2f} N (filter {:.0f} ms); hole clearance {:.2f} mm; "
-      "{} x 4 trials ({} familiarisation), timeout {:.0f} s; familiarisation {:.0f} + {:.0f} s",
+      "{} x 4 trials ({} familiarisation), timeout {:.0f} s; familiarisation {:.0f} + {:.0f} s; finger coupling "
+      "{:.2f} N m/rad",
       1e3 * peg.radius_m, 1e3 * peg.length_m, 1e3 * peg.mass_kg, peg.break_force_n,
       1e3 * peg.break_filter_time_constant_s, 1e3 * hole.clearance_m, main_task.repetitions,
       main_task.familiarisation_trials, main_task.trial_timeout_s, familiarisation.spring_phase_s,
-      familiarisation.ground_phase_s);
+      familiarisation.ground_phase_s, devices.finger_joint_stiffness_nm_per_rad);
 }
 
 Result<PegInHoleConfig> PegInHoleConfig::load_file(const std::filesystem::path& path) {
@@ -219,7 +220,9 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("devices"));
     if (t) {
-      PEG_CHECK(t->check_keys("devices", {"fingers", "model"}));
+      PEG_CHECK(t->check_keys("devices", {"fingers", "model", "finger_joint_stiffness_nm_per_rad"}));
+      PEG_CHECK(read_double(*t, "finger_joint_stiffness_nm_per_rad", out.devices.finger_joint_stiffness_nm_per_rad,
+                            0.05, 20.0));
       if (t->contains("fingers")) {
         PEG_TRY(names, t->get_strings("fingers"));
         out.devices.fingers.clear();
@@ -267,6 +270,7 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
           {"haptic_force_noise_n", &s.haptic_force_noise_n, 0.0, 10.0},
           {"visual_reaction_s", &s.visual_reaction_s, 0.0, 5.0},
           {"grip_target_n", &s.grip_target_n, 0.01, 50.0},
+          {"felt_ceiling_n", &s.felt_ceiling_n, 0.05, 50.0},
           {"grip_load_ratio", &s.grip_load_ratio, 0.0, 10.0},
           {"closing_speed", &s.closing_speed, 0.01, 10.0},
           {"feedforward_closure", &s.feedforward_closure, 0.0, 2.0},

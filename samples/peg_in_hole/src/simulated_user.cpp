@@ -54,11 +54,13 @@ HandAngles SimulatedUser::posture(double s) const {
   set(HandDof::thumb_cmc_abduction, 40);
   set(HandDof::thumb_mcp_flexion, 20);
   set(HandDof::thumb_ip_flexion, 15);
-  // Mostly at the MCP, so the pads (not the nails) face the thumb as the
-  // fingers close: about 90 degrees of total flexion at s = 1.
-  for (HandDof d : {HandDof::index_mcp_flexion, HandDof::middle_mcp_flexion}) set(d, 10 + 45 * s);
-  for (HandDof d : {HandDof::index_pip_flexion, HandDof::middle_pip_flexion}) set(d, 15 + 25 * s);
-  for (HandDof d : {HandDof::index_dip_flexion, HandDof::middle_dip_flexion}) set(d, 5 + 10 * s);
+  // The fingers curl to a pinch shape by s = 1; past that only the MCP
+  // flexes, so squeezing presses the pads into the peg instead of rolling
+  // them off it onto the middle phalanges (which the devices cannot render).
+  const double curl = std::min(s, 1.0);
+  for (HandDof d : {HandDof::index_mcp_flexion, HandDof::middle_mcp_flexion}) set(d, 10 + 40 * s);
+  for (HandDof d : {HandDof::index_pip_flexion, HandDof::middle_pip_flexion}) set(d, 15 + 25 * curl);
+  for (HandDof d : {HandDof::index_dip_flexion, HandDof::middle_dip_flexion}) set(d, 5 + 10 * curl);
   // Ring and little stay curled out of the way.
   for (HandDof d : {HandDof::ring_mcp_flexion, HandDof::little_mcp_flexion}) set(d, 70);
   for (HandDof d : {HandDof::ring_pip_flexion, HandDof::little_pip_flexion}) set(d, 90);
@@ -74,7 +76,7 @@ void SimulatedUser::begin(TimeNs now_ns, const Pose& T_world_wrist_rest) {
   move_duration_s_ = 0.0;
   phase_ = Phase::wait_respawn;  // look first, then plan
   s_ = 0.0;
-  touch_noticed_ = touch_missing_ = false;
+  touch_noticed_ = touch_missing_ = last_visual_ok_ = false;
   stable_since_ = -1;
   align_iterations_ = 0;
   next_visual_check_ = now_ns;
@@ -217,24 +219,42 @@ void SimulatedUser::plan_grasp(const Pose& T_world_peg_seen) {
   T_pre_.p += Vec3(-0.03, 0.03, 0.08);
 }
 
-void SimulatedUser::regulate_grip(const Percept& p, double dt) {
+double SimulatedUser::wanted_grip_n(const Percept& p) const {
+  // Grip-load coupling (Johansson & Westling 1984): grip >= ratio * load / mu,
+  // with the load felt as shear; never knowingly near the break force.
+  double shear = 0.0;
+  for (double v : p.felt_shear_n) shear = std::max(shear, v);
+  return std::min(std::max(grip_target_n_, o_.grip_load_ratio * shear / config_.peg.friction),
+                  config_.peg.break_force_n - 0.6);
+}
+
+bool SimulatedUser::regulate_grip(const Percept& p, double dt) {
+  const double wanted = wanted_grip_n(p);
+  bool settled = false;
   if (!touch_missing_) {
-    // Felt grip toward the target, raised with the felt load (grip-load
-    // coupling, Johansson & Westling 1984): grip >= ratio * load / mu.
-    double shear = 0.0;
-    for (double s : p.felt_shear_n) shear = std::max(shear, s);
-    const double target = std::min(std::max(grip_target_n_, o_.grip_load_ratio * shear / config_.peg.friction),
-                                   config_.peg.break_force_n - 0.6);
     const double felt = felt_grip(p) + rng_.normal(0.0, o_.haptic_force_noise_n);
-    s_ += std::clamp(0.08 * (target - felt), -0.5, 0.5) * dt * 4.0;
-  } else if (now_ >= next_visual_check_) {
-    // By eye: the colour, checked every reaction time.
+    if (wanted < o_.felt_ceiling_n || felt < o_.felt_ceiling_n) {
+      // Touch can tell: servo the felt force (up to what the device renders).
+      const double target = std::min(wanted, o_.felt_ceiling_n);
+      s_ += std::clamp(0.08 * (target - felt), -0.5, 0.5) * dt * 4.0;
+      s_ = std::clamp(s_, s_open_, kMaxClosure);
+      // Above the ceiling, a dip of the felt force is noise, not news: the
+      // last look at the colour still stands.
+      return wanted < o_.felt_ceiling_n ? std::abs(felt - wanted) < 0.5 : last_visual_ok_;
+    }
+  }
+  // Past what the device renders, or without touch: by eye, the colour,
+  // checked every reaction time.
+  if (now_ >= next_visual_check_) {
     const double seen = seen_force(p);
     if (seen > config_.peg.break_force_n - 1.0) s_ -= 0.06;
-    else if (seen < grip_target_n_ - 1.2) s_ += 0.05;
+    else if (seen < wanted - 1.2) s_ += 0.05;
+    else settled = true;
     next_visual_check_ = now_ + static_cast<TimeNs>(o_.visual_reaction_s * 1e9);
+    last_visual_ok_ = settled;
   }
   s_ = std::clamp(s_, s_open_, kMaxClosure);
+  return last_visual_ok_;
 }
 
 HandCommand SimulatedUser::act(const Percept& p) {
@@ -314,6 +334,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
           touch_missing_ = !touch_noticed_;
           ff_closure_this_grasp_ = std::max(0.0, rng_.normal(feedforward_, o_.feedforward_closure_sd));
           stable_since_ = -1;
+          last_visual_ok_ = false;
           next_visual_check_ = now_ + static_cast<TimeNs>(o_.visual_reaction_s * 1e9);
         }
         if (s_ > kMaxClosure) go(Phase::release);  // closed on nothing
@@ -321,9 +342,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
       }
       if (touch_missing_ && contact_felt(p)) touch_missing_ = false;  // it was felt after all
       if (!touch_missing_) {
-        regulate_grip(p, dt);
-        const double err = std::abs(felt_grip(p) - grip_target_n_);
-        if (err < 0.5) {
+        if (regulate_grip(p, dt)) {
           if (stable_since_ < 0) stable_since_ = now_;
         } else {
           stable_since_ = -1;
@@ -388,6 +407,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
           (shift - shift.dot(h.axis_in_world) * h.axis_in_world).norm() < o_.alignment_tolerance_m) {
         insert_origin_ = cmd_.p;
         insert_progress_m_ = 0.0;
+        insert_depth0_ = 2.0;  // set on the first insert tick
         go(Phase::insert);
         break;
       }
@@ -417,10 +437,12 @@ HandCommand SimulatedUser::act(const Percept& p) {
       cmd_ = target;
       move_from_ = move_to_ = cmd_;
       move_duration_s_ = 0.0;
-      // Jammed: the hand got ahead of the peg, or it is tilted; back off and realign.
-      const Vec3 hand_ahead = (cmd_.p - insert_origin_);
-      (void)hand_ahead;
-      if ((depth > -0.003 && depth < 0.005 && (lateral.norm() > config_.hole.clearance_m || angle_err > 0.08)) ||
+      if (insert_depth0_ > 1.0) insert_depth0_ = depth;
+      // Jammed: the hand has pushed on further than the peg went (it is
+      // caught on the rim; the grasp gives), or the peg is visibly tilted at
+      // the entry. Back off and realign.
+      const double hand_ahead_m = insert_progress_m_ - (depth - insert_depth0_);
+      if (hand_ahead_m > 0.02 || (depth > -0.003 && depth < 0.005 && angle_err > 0.08) ||
           insert_progress_m_ > 0.015 + config_.hole.insertion_depth_m + 0.04) {
         Pose back = cmd_;
         back.p -= 0.02 * h.axis_in_world;

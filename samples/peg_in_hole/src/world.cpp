@@ -1,3 +1,4 @@
+#include <cmath>
 #include "proprio/peg_in_hole/world.hpp"
 
 #include <fmt/format.h>
@@ -43,7 +44,12 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
     // Familiarisation has no hole to finish in.
     std::erase_if(scene.objects, [](const haptics::SceneObject& o) { return o.name == "hole_plate"; });
   }
-  auto sim = haptics::ContactSimulation::create(hand_model, Handedness::right, scene);
+  haptics::ContactSimOptions cso;
+  cso.coupling.joint_stiffness_nm_per_rad = config.devices.finger_joint_stiffness_nm_per_rad;
+  // Critically damped at the new stiffness (contact_sim.hpp: 2 sqrt(k I)).
+  cso.coupling.joint_damping_nms_per_rad =
+      2.0 * std::sqrt(cso.coupling.joint_stiffness_nm_per_rad * cso.coupling.joint_armature_kg_m2);
+  auto sim = haptics::ContactSimulation::create(hand_model, Handedness::right, scene, cso);
   if (!sim) return sim.error().with_context("peg-in-hole scene");
   if (phase == WorldPhase::spring) {
     const FamiliarisationOptions& f = config.familiarisation;

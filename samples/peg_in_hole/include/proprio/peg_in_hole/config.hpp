@@ -68,6 +68,12 @@ struct MainTaskOptions {
 struct DeviceOptions {
   std::vector<Finger> fingers{Finger::thumb, Finger::index, Finger::middle};
   std::filesystem::path model;  // empty: config/haptics/platform_3dof.toml (3-DOF)
+  // Virtual coupling of the proxy's finger joints (haptics::CouplingOptions).
+  // The haptics default (0.5 N m/rad) gives about 1 N of pinch at full finger
+  // closure, less than the ~3.1 N per side that lifting 500 g at friction 0.8
+  // takes; 2.5 N m/rad puts 3-5 N within the fingers' range of motion (peg
+  // probe, docs/peg-in-hole.md). Damping stays critical.
+  double finger_joint_stiffness_nm_per_rad = 2.5;
 };
 
 struct RecordingOptions {
@@ -101,6 +107,10 @@ struct SimUserOptions {
   // the felt load (grip-load coupling); without, close by feel-less feed-forward
   // and look at the colour.
   double grip_target_n = 3.6;
+  // The strongest force the participant has learnt its device renders (the
+  // 3-DOF platform clamps at 1.5 N): a felt target above it is never reached,
+  // so felt grip is regulated to at most this and the rest is closure.
+  double felt_ceiling_n = 1.3;
   double grip_load_ratio = 1.3;        // grip >= ratio * felt shear / friction
   double closing_speed = 0.6;          // posture closure per second
   double feedforward_closure = 0.42;   // extra closure past contact without touch

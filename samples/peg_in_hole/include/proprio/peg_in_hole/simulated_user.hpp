@@ -73,7 +73,9 @@ class SimulatedUser {
   double felt_grip(const Percept& p) const;
   double seen_force(const Percept& p);
   bool contact_felt(const Percept& p) const;
-  void regulate_grip(const Percept& p, double dt);
+  double wanted_grip_n(const Percept& p) const;
+  // One tick of grip control; true while the grip is where the user wants it.
+  bool regulate_grip(const Percept& p, double dt);
   void go(Phase next);
   double caution() const noexcept;
 
@@ -99,12 +101,13 @@ class SimulatedUser {
   Vec3 percept_p_err_ = Vec3::Zero(), percept_r_err_ = Vec3::Zero();
   // Grip.
   double grip_target_n_, feedforward_;
-  bool touch_noticed_ = false, touch_missing_ = false;
+  bool touch_noticed_ = false, touch_missing_ = false, last_visual_ok_ = false;
   TimeNs next_visual_check_ = 0, stable_since_ = -1;
   double ff_closure_this_grasp_ = 0.0;
   double contact_s_ = -1.0;
   int regrasps_ = 0, align_iterations_ = 0;
   double insert_progress_m_ = 0.0;
+  double insert_depth0_ = 2.0;  // the peg's depth when pushing began (> 1: not yet seen)
   Vec3 insert_origin_ = Vec3::Zero();
 };
 

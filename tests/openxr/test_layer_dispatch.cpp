@@ -98,8 +98,6 @@ class LayerDispatch : public ::testing::Test {
   }();
 };
 
-}  // namespace
-
 TEST(LayerNegotiation, FillsTheRequestAndRejectsMalformedStructs) {
   fake_next::Chain chain;
   ASSERT_EQ(chain.negotiate(), XR_SUCCESS);
@@ -338,3 +336,5 @@ TEST_F(LayerDispatch, DestroyingTheSessionDestroysItsTrackers) {
   EXPECT_EQ(fake_next::state().live_spaces.load(), 0);
   EXPECT_EQ(locate(t, fake_next::xr_now(), &locations_), XR_ERROR_HANDLE_INVALID);
 }
+
+}  // namespace

@@ -144,8 +144,6 @@ class LayerThroughLoader : public ::testing::TestWithParam<bool> {
 
 XrTime now_xr() { return proprio::mock_xr::xr_time_now(); }
 
-}  // namespace
-
 TEST_P(LayerThroughLoader, EnumeratesItsExtensions) {
   uint32_t n = 0;
   XR_OK(xrEnumerateInstanceExtensionProperties(kOurLayer, 0, &n, nullptr));
@@ -387,3 +385,5 @@ TEST(ImplicitLayer, LoadsWithoutBeingEnabledAndHonoursItsDisableVariable) {
             XR_ERROR_EXTENSION_NOT_PRESENT);
   ::unsetenv("DISABLE_XR_APILAYER_PROPRIO_HAND_TRACKING");
 }
+
+}  // namespace

@@ -4,6 +4,7 @@
 #include <fstream>
 
 #include "proprio/core/config.hpp"
+#include "support/text.hpp"
 
 using namespace proprio;
 
@@ -13,9 +14,7 @@ Config parse_ok(std::string_view text) {
   EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
   return *c;
 }
-bool contains(const std::string& haystack, std::string_view needle) {
-  return haystack.find(needle) != std::string::npos;
-}
+using proprio::testing_support::contains;
 TEST(Config, CheckKeysNamesTheUnknownKeyItsPlaceAndTheAllowedOnes) {
   const Config c = parse_ok("a = 1\n[rig]\nfx = 640\nfy = 1\n");
   EXPECT_TRUE(c.check_keys("top level", {"a", "rig"}));

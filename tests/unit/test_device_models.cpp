@@ -7,6 +7,7 @@
 #include <string>
 
 #include "proprio/haptics/device_model.hpp"
+#include "support/text.hpp"
 
 using namespace proprio;
 using namespace proprio::haptics;
@@ -23,9 +24,7 @@ std::unique_ptr<FingertipDeviceModel> load(const std::string& file) {
   return m.ok() ? std::move(*m) : nullptr;
 }
 
-bool contains(const std::string& haystack, std::string_view needle) {
-  return haystack.find(needle) != std::string::npos;
-}
+using proprio::testing_support::contains;
 
 std::string error_of(std::string_view toml, std::string_view name = "dev.toml") {
   auto m = parse_device_model(toml, name);

@@ -16,16 +16,14 @@
 #include "proprio/glove/readout.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
+#include "support/stretch_glove.hpp"
 
 namespace proprio::glove {
 namespace {
 
 namespace fs = std::filesystem;
 
-const StretchGloveLayout& layout() {
-  static const StretchGloveLayout L = StretchGloveLayout::thesis_default();
-  return L;
-}
+using proprio::testing_support::thesis_layout;
 
 fs::path temp_dir(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("proprio_test_" + name + "_" + std::to_string(::getpid()));
@@ -35,12 +33,12 @@ fs::path temp_dir(const std::string& name) {
 }
 
 MinMaxCalibrator make_calibrator() {
-  auto c = MinMaxCalibrator::create(layout());
+  auto c = MinMaxCalibrator::create(thesis_layout());
   EXPECT_TRUE(c.ok()) << c.error().message;
   return std::move(*c);
 }
 
-std::vector<float> constant_frame(float v) { return std::vector<float>(layout().cell_count(), v); }
+std::vector<float> constant_frame(float v) { return std::vector<float>(thesis_layout().cell_count(), v); }
 
 TEST(GloveCalibration, MedianFilterIgnoresASpike) {
   auto cal = make_calibrator();
@@ -100,7 +98,7 @@ TEST(GloveCalibration, SaveLoadRoundTrip) {
   Rng rng(9);
   for (int i = 0; i < 200; ++i) {
     std::vector<float> f;
-    for (std::size_t c = 0; c < layout().cell_count(); ++c) f.push_back(static_cast<float>(rng.uniform(5.0, 30.0)));
+    for (std::size_t c = 0; c < thesis_layout().cell_count(); ++c) f.push_back(static_cast<float>(rng.uniform(5.0, 30.0)));
     cal.add(f);
   }
   auto c = cal.finish("unit test \"quoted\"", "2024-01-01");
@@ -112,11 +110,11 @@ TEST(GloveCalibration, SaveLoadRoundTrip) {
   ASSERT_TRUE(back.ok()) << back.error().message;
   EXPECT_EQ(back->min_pf, c->min_pf);
   EXPECT_EQ(back->max_pf, c->max_pf);
-  EXPECT_EQ(back->layout_name, layout().name);
+  EXPECT_EQ(back->layout_name, thesis_layout().name);
   EXPECT_EQ(back->source, "unit test \"quoted\"");
   EXPECT_EQ(back->created, "2024-01-01");
   EXPECT_EQ(back->frames, 200u);
-  EXPECT_TRUE(back->check_layout(layout()).ok());
+  EXPECT_TRUE(back->check_layout(thesis_layout()).ok());
   fs::remove_all(dir);
 }
 
@@ -154,12 +152,12 @@ TEST(GloveCalibration, CorruptedFilesGiveClearErrors) {
   EXPECT_EQ(nofile.error().code, Errc::not_found);
 
   MinMaxCalibration other = good;
-  EXPECT_FALSE(other.check_layout(layout()).ok());
+  EXPECT_FALSE(other.check_layout(thesis_layout()).ok());
 }
 
 TEST(GloveCalibration, ProgressSaysWhatToMoveMore) {
   auto cal = make_calibrator();
-  const auto& L = layout();
+  const auto& L = thesis_layout();
   // Only the index finger's cells move.
   for (int i = 0; i < 200; ++i) {
     std::vector<float> f;
@@ -188,10 +186,10 @@ TEST(GloveCalibration, InvalidCellsAreNotCalibrated) {
   auto cal = make_calibrator();
   CellFrame f;
   f.cells_pf = constant_frame(10.0f);
-  f.status.assign(layout().cell_count(), CellStatus::valid);
+  f.status.assign(thesis_layout().cell_count(), CellStatus::valid);
   f.status[3] = CellStatus::dead;
   for (int i = 0; i < 40; ++i) {
-    f.cells_pf.assign(layout().cell_count(), i < 20 ? 10.0f : 30.0f);
+    f.cells_pf.assign(thesis_layout().cell_count(), i < 20 ? 10.0f : 30.0f);
     f.cells_pf[3] = 0.0f;
     cal.add(f);
   }
@@ -201,35 +199,35 @@ TEST(GloveCalibration, InvalidCellsAreNotCalibrated) {
 }
 
 TEST(GloveCalibration, InputGridPlacesEveryCell) {
-  const InputGrid grid(layout());
+  const InputGrid grid(thesis_layout());
   std::vector<float> normalized;
-  for (std::size_t i = 0; i < layout().cell_count(); ++i) normalized.push_back(static_cast<float>(i + 1));
+  for (std::size_t i = 0; i < thesis_layout().cell_count(); ++i) normalized.push_back(static_cast<float>(i + 1));
   std::vector<float> out(kStretchInputSize, -7.0f);
   grid.fill(normalized, out);
   std::size_t filled = 0;
-  for (std::size_t i = 0; i < layout().cell_count(); ++i) {
-    const auto& c = layout().cells[i];
+  for (std::size_t i = 0; i < thesis_layout().cell_count(); ++i) {
+    const auto& c = thesis_layout().cells[i];
     // NCHW with N = 1: channel (layer), then row, then column.
     EXPECT_EQ(out[static_cast<std::size_t>(c.grid_layer * 25 + c.grid_row * 5 + c.grid_col)], static_cast<float>(i + 1));
   }
   for (float v : out) filled += v != 0.0f;
-  EXPECT_EQ(filled, layout().cell_count());  // and the six empty slots are 0
+  EXPECT_EQ(filled, thesis_layout().cell_count());  // and the six empty slots are 0
 }
 
 // --- dataset ---------------------------------------------------------------------
 
 // A minimal NPY 1.0 reader, written from the format description, to check the writer.
-struct Npy {
+struct RawNpy {
   std::string descr;
   bool fortran = true;
   std::vector<std::size_t> shape;
   std::vector<char> data;
 };
 
-Npy read_npy(const fs::path& path) {
+RawNpy read_raw_npy(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  Npy out;
+  RawNpy out;
   EXPECT_GE(bytes.size(), 10u);
   if (bytes.size() < 10) return out;
   EXPECT_EQ(std::string(bytes.data(), 6), "\x93NUMPY");
@@ -259,7 +257,7 @@ Npy read_npy(const fs::path& path) {
 }
 
 template <typename T>
-std::vector<T> values(const Npy& n) {
+std::vector<T> values(const RawNpy& n) {
   std::vector<T> v(n.data.size() / sizeof(T));
   std::memcpy(v.data(), n.data.data(), v.size() * sizeof(T));
   return v;
@@ -273,19 +271,19 @@ DatasetSession tiny_session(int subject, int session, std::size_t frames, float 
   s.hand_length_m = 0.18;
   s.hand_width_m = 0.095;
   for (std::size_t f = 0; f < frames; ++f) {
-    for (std::size_t c = 0; c < layout().cell_count(); ++c) s.cells.push_back(base + static_cast<float>(f * 100 + c));
+    for (std::size_t c = 0; c < thesis_layout().cell_count(); ++c) s.cells.push_back(base + static_cast<float>(f * 100 + c));
     for (std::size_t d = 0; d < kHandDofCount; ++d) s.angles.push_back(0.01f * static_cast<float>(f * 20 + d));
     s.phase.push_back(f < frames / 2 ? 0 : 1);
   }
-  s.calibration.layout_name = layout().name;
-  s.calibration.min_pf.assign(layout().cell_count(), base);
-  s.calibration.max_pf.assign(layout().cell_count(), base + 1.0f);
+  s.calibration.layout_name = thesis_layout().name;
+  s.calibration.min_pf.assign(thesis_layout().cell_count(), base);
+  s.calibration.max_pf.assign(thesis_layout().cell_count(), base + 1.0f);
   return s;
 }
 
 TEST(GloveDataset, FilesParseBackWithShapesAndValues) {
   const fs::path dir = temp_dir("dataset");
-  auto w = DatasetWriter::create(dir, layout(), 60.0, false);
+  auto w = DatasetWriter::create(dir, thesis_layout(), 60.0, false);
   ASSERT_TRUE(w.ok()) << w.error().message;
   const auto a = tiny_session(3, 0, 5, 10.0f);
   const auto b = tiny_session(4, 1, 7, 20.0f);
@@ -293,8 +291,8 @@ TEST(GloveDataset, FilesParseBackWithShapesAndValues) {
   ASSERT_TRUE(w->add_session(b).ok());
   ASSERT_TRUE(w->finish("{\"tool\": \"unit test\", \"seed\": 7}").ok());
 
-  const std::size_t C = layout().cell_count();
-  const Npy cells = read_npy(dir / "cells.npy");
+  const std::size_t C = thesis_layout().cell_count();
+  const RawNpy cells = read_raw_npy(dir / "cells.npy");
   EXPECT_EQ(cells.descr, "<f4");
   EXPECT_FALSE(cells.fortran);
   EXPECT_EQ(cells.shape, (std::vector<std::size_t>{12, C}));
@@ -302,32 +300,32 @@ TEST(GloveDataset, FilesParseBackWithShapesAndValues) {
   expected_cells.insert(expected_cells.end(), b.cells.begin(), b.cells.end());
   EXPECT_EQ(values<float>(cells), expected_cells);
 
-  const Npy angles = read_npy(dir / "angles.npy");
+  const RawNpy angles = read_raw_npy(dir / "angles.npy");
   EXPECT_EQ(angles.shape, (std::vector<std::size_t>{12, kHandDofCount}));
   EXPECT_EQ(values<float>(angles)[5 * 20 + 3], b.angles[3]);
 
-  const Npy session = read_npy(dir / "session.npy");
+  const RawNpy session = read_raw_npy(dir / "session.npy");
   EXPECT_EQ(session.descr, "<i4");
   EXPECT_EQ(session.shape, (std::vector<std::size_t>{12}));
   EXPECT_EQ(values<std::int32_t>(session), (std::vector<std::int32_t>{0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1}));
-  EXPECT_EQ(values<std::int32_t>(read_npy(dir / "subject.npy")),
+  EXPECT_EQ(values<std::int32_t>(read_raw_npy(dir / "subject.npy")),
             (std::vector<std::int32_t>{3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4}));
-  const Npy phase = read_npy(dir / "phase.npy");
+  const RawNpy phase = read_raw_npy(dir / "phase.npy");
   EXPECT_EQ(phase.descr, "|u1");
   EXPECT_EQ(values<std::uint8_t>(phase), (std::vector<std::uint8_t>{0, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1, 1}));
 
-  const Npy cmin = read_npy(dir / "calib_min.npy"), cmax = read_npy(dir / "calib_max.npy");
+  const RawNpy cmin = read_raw_npy(dir / "calib_min.npy"), cmax = read_raw_npy(dir / "calib_max.npy");
   EXPECT_EQ(cmin.shape, (std::vector<std::size_t>{2, C}));
   EXPECT_EQ(values<float>(cmin)[C], 20.0f);
   EXPECT_EQ(values<float>(cmax)[0], 11.0f);
 
   std::ifstream meta_in(dir / "meta.json");
   const auto meta = nlohmann::json::parse(meta_in);
-  EXPECT_EQ(meta["layout"], layout().name);
+  EXPECT_EQ(meta["layout"], thesis_layout().name);
   EXPECT_EQ(meta["cell_count"], C);
   EXPECT_EQ(meta["frame_rate_hz"], 60.0);
   EXPECT_EQ(meta["frames"], 12);
-  EXPECT_EQ(meta["input_grid_index"].get<std::vector<int>>(), layout().input_grid_index());
+  EXPECT_EQ(meta["input_grid_index"].get<std::vector<int>>(), thesis_layout().input_grid_index());
   ASSERT_EQ(meta["output_grid"].size(), 25u);
   EXPECT_EQ(meta["output_grid"][0], "thumb_cmc_abduction");
   EXPECT_TRUE(meta["output_grid"][4].is_null());
@@ -343,10 +341,10 @@ TEST(GloveDataset, FilesParseBackWithShapesAndValues) {
   EXPECT_EQ(meta["cell_categories"][16], "abduction");
 
   // An existing dataset is kept unless overwriting is asked for.
-  auto again = DatasetWriter::create(dir, layout(), 60.0, false);
+  auto again = DatasetWriter::create(dir, thesis_layout(), 60.0, false);
   ASSERT_FALSE(again.ok());
   EXPECT_NE(again.error().message.find("--force"), std::string::npos);
-  auto forced = DatasetWriter::create(dir, layout(), 60.0, true);
+  auto forced = DatasetWriter::create(dir, thesis_layout(), 60.0, true);
   ASSERT_TRUE(forced.ok()) << forced.error().message;
   EXPECT_FALSE(fs::exists(dir / "meta.json")) << "an unfinished dataset has no meta.json";
   fs::remove_all(dir);
@@ -354,7 +352,7 @@ TEST(GloveDataset, FilesParseBackWithShapesAndValues) {
 
 TEST(GloveDataset, RejectsInconsistentSessions) {
   const fs::path dir = temp_dir("dataset_bad");
-  auto w = DatasetWriter::create(dir, layout(), 60.0, false);
+  auto w = DatasetWriter::create(dir, thesis_layout(), 60.0, false);
   ASSERT_TRUE(w.ok());
   auto s = tiny_session(0, 0, 3, 1.0f);
   s.cells.pop_back();
@@ -370,13 +368,13 @@ TEST(GloveDataset, RejectsInconsistentSessions) {
 TEST(GloveDataset, SimulatedPipelineCalibratesIntoRange) {
   // Simulator -> read-out -> calibrator on the exploration -> normalised task
   // frames mostly inside [-1, 1].
-  auto sim = sim::StretchGloveSimulator::create(layout(), *(*sim::sim_subject(5)).shape(), sim::StretchGloveSimOptions{});
+  auto sim = sim::StretchGloveSimulator::create(thesis_layout(), *(*sim::sim_subject(5)).shape(), sim::StretchGloveSimOptions{});
   ASSERT_TRUE(sim.ok());
   sim::StretchSessionOptions so;
   so.exploration_s = 16.0;  // about ten postures: enough to span most of each cell's range
   so.task_s = 4.0;
   sim::StretchGloveSession session(std::move(*sim), so);
-  auto readout = MatrixReadout::create(layout());
+  auto readout = MatrixReadout::create(thesis_layout());
   ASSERT_TRUE(readout.ok());
   auto cal = make_calibrator();
   CellFrame frame = readout->make_frame();

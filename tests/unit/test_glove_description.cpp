@@ -7,14 +7,13 @@
 
 #include "proprio/core/glove_description.hpp"
 #include "support/temp_dir.hpp"
+#include "support/text.hpp"
 
 using namespace proprio;
 
 namespace {
 
-bool contains(const std::string& haystack, std::string_view needle) {
-  return haystack.find(needle) != std::string::npos;
-}
+using proprio::testing_support::contains;
 
 HandShape shape_of(double length_m, double width_m) {
   auto s = HandShape::from_measurements(length_m, width_m);

@@ -18,13 +18,14 @@
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/subjects.hpp"
+#include "support/devices.hpp"
 
 namespace proprio::devices {
 namespace {
 
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
-constexpr double kG = 9.80665;
+using proprio::testing_support::kG;
 
 std::vector<ImuSample> samples_of(std::span<const sim::ImuReading> readings) {
   std::vector<ImuSample> out;
@@ -429,14 +430,8 @@ TEST(GloveEmulator, RefusesBadOptionsAndInputsWithUsableMessages) {
 
 fs::path corpus_dir() { return fs::path(__FILE__).parent_path().parent_path() / "fuzz" / "corpus" / "glove_protocol"; }
 
-void write_bytes(const fs::path& p, const Bytes& b) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
-}
-Bytes read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using proprio::testing_support::read_bytes;
+using proprio::testing_support::write_bytes;
 Bytes concat(const std::vector<GloveEmulatedReport>& reports) {
   Bytes out;
   for (const auto& r : reports) out.insert(out.end(), r.bytes.begin(), r.bytes.end());

@@ -13,15 +13,16 @@
 #include "proprio/core/random.hpp"
 #include "proprio/devices/glove_protocol.hpp"
 #include "proprio/devices/glove_stream.hpp"
+#include "support/devices.hpp"
 
 namespace proprio::devices {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
-constexpr double kG = 9.80665;
+using proprio::testing_support::kG;
 constexpr double kDeg = 0.017453292519943295;
 
-Bytes bytes_of(const auto& array) { return Bytes(array.begin(), array.end()); }
+using proprio::testing_support::bytes_of;
 
 GloveDataReport random_report(Rng& rng) {
   GloveDataReport r;

@@ -12,17 +12,15 @@
 #include "proprio/glove/readout.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
+#include "support/stretch_glove.hpp"
 
 namespace proprio::glove {
 namespace {
 
-const StretchGloveLayout& layout() {
-  static const StretchGloveLayout L = StretchGloveLayout::thesis_default();
-  return L;
-}
+using proprio::testing_support::thesis_layout;
 
 MatrixReadout make_readout(ReadoutOptions o = {}) {
-  auto r = MatrixReadout::create(layout(), o);
+  auto r = MatrixReadout::create(thesis_layout(), o);
   EXPECT_TRUE(r.ok()) << r.error().message;
   return std::move(*r);
 }
@@ -30,7 +28,7 @@ MatrixReadout make_readout(ReadoutOptions o = {}) {
 // C_m built cell by cell from the read-out rule (a cell counts when exactly
 // one of its strips is a source), independently of measurement_matrix().
 std::vector<double> measure_all(const std::vector<double>& cells) {
-  const auto& L = layout();
+  const auto& L = thesis_layout();
   std::vector<double> out;
   for (int t = 0; t < L.top_strips; ++t) {
     for (int b = 0; b < L.bottom_strips; ++b) {
@@ -48,7 +46,7 @@ std::vector<double> measure_all(const std::vector<double>& cells) {
 
 std::vector<double> random_cells(Rng& rng) {
   std::vector<double> c;
-  for (const auto& cell : layout().cells) c.push_back(cell.rest_capacitance_pf * rng.uniform(1.0, 2.5));
+  for (const auto& cell : thesis_layout().cells) c.push_back(cell.rest_capacitance_pf * rng.uniform(1.0, 2.5));
   return c;
 }
 
@@ -97,7 +95,7 @@ TEST(GloveReadout, StreamingRecoversAStaticHandAfterOneCycle) {
 // cell c has standard deviation sigma * |row c of M^+| (M^+ = (M^T M)^-1 M^T).
 TEST(GloveReadout, NoisyErrorMatchesLeastSquaresTheory) {
   auto r = make_readout();
-  const Eigen::MatrixXd M = layout().measurement_matrix();
+  const Eigen::MatrixXd M = thesis_layout().measurement_matrix();
   const Eigen::MatrixXd P = (M.transpose() * M).ldlt().solve(M.transpose());
   const double sigma = 0.2;
   Rng rng(3);
@@ -116,7 +114,7 @@ TEST(GloveReadout, NoisyErrorMatchesLeastSquaresTheory) {
   for (std::size_t c = 0; c < cells.size(); ++c) {
     const double theory = sigma * P.row(static_cast<Eigen::Index>(c)).norm();
     const double measured = std::sqrt(sq[c] / trials);
-    EXPECT_NEAR(measured, theory, 0.25 * theory) << layout().cells[c].name;
+    EXPECT_NEAR(measured, theory, 0.25 * theory) << thesis_layout().cells[c].name;
     ratio_sum += measured / theory;
   }
   EXPECT_NEAR(ratio_sum / static_cast<double>(cells.size()), 1.0, 0.05);
@@ -205,7 +203,7 @@ TEST(GloveReadout, CellsWithoutRowsAreUnobservable) {
   auto cm = measure_all(cells);
   // Knock out every row that sees cell 33 (index MCP): no row can tell it apart.
   const std::size_t target = 33;
-  const auto& L = layout();
+  const auto& L = thesis_layout();
   for (int t = 0; t < L.top_strips; ++t) {
     for (int b = 0; b < L.bottom_strips; ++b) {
       if ((L.cells[target].top_strip == t) != (L.cells[target].bottom_strip == b)) {
@@ -229,10 +227,10 @@ TEST(GloveReadout, CellsWithoutRowsAreUnobservable) {
 
 TEST(GloveReadout, DeadCellIsFlagged) {
   // A simulated open lead: the dead cell reads ~0 in every measurement.
-  auto sim = sim::StretchGloveSimulator::create(layout(), *(*sim::sim_subject(4)).shape(),
+  auto sim = sim::StretchGloveSimulator::create(thesis_layout(), *(*sim::sim_subject(4)).shape(),
                                                 sim::StretchGloveSimOptions::ideal());
   ASSERT_TRUE(sim.ok());
-  const std::size_t dead = *layout().find_cell("ring_pip_along");
+  const std::size_t dead = *thesis_layout().find_cell("ring_pip_along");
   sim::StretchFaults faults;
   faults.dead_cells = {dead};
   sim->set_faults(faults);
@@ -250,7 +248,7 @@ TEST(GloveReadout, DeadCellIsFlagged) {
     EXPECT_NEAR(f.cells_pf[dead], 0.0, 1e-6);
     for (std::size_t c = 0; c < f.status.size(); ++c) {
       if (c != dead) {
-        EXPECT_TRUE(f.valid(c)) << layout().cells[c].name;
+        EXPECT_TRUE(f.valid(c)) << thesis_layout().cells[c].name;
       }
     }
   }
@@ -261,7 +259,7 @@ TEST(GloveReadout, DeadCellIsFlagged) {
   EXPECT_LE(first_dead_frame, 12 + 12 + 5);
   // A single C_m vector is judged at once.
   std::vector<double> cm(182);
-  auto sim2 = sim::StretchGloveSimulator::create(layout(), *(*sim::sim_subject(4)).shape(),
+  auto sim2 = sim::StretchGloveSimulator::create(thesis_layout(), *(*sim::sim_subject(4)).shape(),
                                                  sim::StretchGloveSimOptions::ideal());
   sim2->set_faults(faults);
   for (auto& v : cm) v = sim2->measure(sim::ExplorationMotion::relaxed()).capacitance_pf;
@@ -273,7 +271,7 @@ TEST(GloveReadout, SpikeDoesNotKillALiveCell) {
   // A spike on the row that pulls one cell down hardest: for a cycle least
   // squares puts that cell below 20 % of C0, yet it is not declared dead.
   auto r = make_readout();
-  const Eigen::MatrixXd M = layout().measurement_matrix();
+  const Eigen::MatrixXd M = thesis_layout().measurement_matrix();
   const Eigen::MatrixXd P = (M.transpose() * M).ldlt().solve(M.transpose());
   Eigen::Index cell_i = 0, row_i = 0;
   P.minCoeff(&cell_i, &row_i);
@@ -289,7 +287,7 @@ TEST(GloveReadout, SpikeDoesNotKillALiveCell) {
     const std::size_t comb = k % cm.size();
     const bool spiked = k == cm.size() + static_cast<std::size_t>(row_i);
     if (!r.push(comb, cm[comb] + (spiked ? spike : 0.0), 0, f) || k < cm.size()) continue;
-    dipped = dipped || f.cells_pf[c] < 0.2 * layout().cells[c].rest_capacitance_pf;
+    dipped = dipped || f.cells_pf[c] < 0.2 * thesis_layout().cells[c].rest_capacitance_pf;
     EXPECT_TRUE(f.all_valid()) << k;
   }
   EXPECT_TRUE(dipped) << "the spike should reach the cell (there is no outlier rejection)";
@@ -301,10 +299,10 @@ TEST(GloveReadout, FollowsTheSimulatorUnderNoise) {
   sim::StretchGloveSimOptions o;
   o.enable_outliers = false;
   o.enable_drift = false;
-  auto sim = sim::StretchGloveSimulator::create(layout(), *(*sim::sim_subject(9)).shape(), o);
+  auto sim = sim::StretchGloveSimulator::create(thesis_layout(), *(*sim::sim_subject(9)).shape(), o);
   ASSERT_TRUE(sim.ok());
   const HandAngles pose = sim::ExplorationMotion::relaxed();
-  std::vector<double> truth(layout().cell_count());
+  std::vector<double> truth(thesis_layout().cell_count());
   sim->cell_capacitances(pose, truth);
   auto r = make_readout();
   CellFrame f = r.make_frame();
@@ -321,7 +319,7 @@ TEST(GloveReadout, FollowsTheSimulatorUnderNoise) {
 TEST(GloveReadout, RejectsBadInput) {
   ReadoutOptions o;
   o.solve_every = 0;
-  auto bad = MatrixReadout::create(layout(), o);
+  auto bad = MatrixReadout::create(thesis_layout(), o);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("solve_every"), std::string::npos);
   auto r = make_readout();

@@ -20,6 +20,7 @@
 #include "proprio/devices/glove_emulator.hpp"
 #include "proprio/devices/hid_transport.hpp"
 #include "proprio/devices/spsc_ring.hpp"
+#include "support/devices.hpp"
 
 namespace proprio::devices {
 namespace {
@@ -27,15 +28,7 @@ namespace {
 using namespace std::chrono_literals;
 using Bytes = std::vector<std::uint8_t>;
 
-template <typename Pred>
-bool wait_until(Pred pred, std::chrono::seconds timeout = 20s) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!pred()) {
-    if (std::chrono::steady_clock::now() > deadline) return false;
-    std::this_thread::sleep_for(1ms);
-  }
-  return true;
-}
+using proprio::testing_support::wait_until;
 
 // ---------------------------------------------------------------------------
 // SpscRing

@@ -3,12 +3,13 @@
 #include <cstdlib>
 
 #include "proprio/openxr_layer/layer_config.hpp"
+#include "support/text.hpp"
 
 using namespace proprio;
 using namespace proprio::openxr_layer;
 
 namespace {
-bool contains(const std::string& s, std::string_view n) { return s.find(n) != std::string::npos; }
+using proprio::testing_support::contains;
 }  // namespace
 
 TEST(LayerConfig, ExampleConfigsParseToTheirDocumentedValues) {

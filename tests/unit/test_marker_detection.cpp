@@ -20,6 +20,7 @@
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/marker_detection.hpp"
 #include "proprio/vist/stereo_matching.hpp"
+#include "support/stereo.hpp"
 
 using namespace proprio;
 using namespace proprio::vist;
@@ -106,10 +107,7 @@ const Marker* nearest(const MarkerObservations& obs, double u, double v, double*
   return best;
 }
 
-int hue_distance(int a, int b) {
-  const int d = std::abs(a - b) % 256;
-  return std::min(d, 256 - d);
-}
+using proprio::testing_support::hue_distance;
 
 }  // namespace
 

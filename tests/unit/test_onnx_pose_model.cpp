@@ -22,6 +22,7 @@
 
 #include "proprio/glove/onnx_pose_model.hpp"
 #include "support/temp_dir.hpp"
+#include "support/text.hpp"
 
 namespace proprio::glove {
 namespace {
@@ -123,9 +124,7 @@ StretchGloveLayout layout_matching(const fs::path& sidecar_path) {
   return layout;
 }
 
-bool contains(const std::string& haystack, const std::string& needle) {
-  return haystack.find(needle) != std::string::npos;
-}
+using proprio::testing_support::contains;
 
 TEST(OnnxPoseModel, MissingFileIsNotFoundAndSaysWhatToDo) {
   TempDir dir;

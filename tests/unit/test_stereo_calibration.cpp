@@ -23,6 +23,7 @@
 #include "proprio/core/random.hpp"
 #include "proprio/vist/stereo_calibration.hpp"
 #include "support/temp_dir.hpp"
+#include "support/text.hpp"
 
 using namespace proprio;
 using namespace proprio::vist;
@@ -30,9 +31,7 @@ using proprio::testing_support::TempDir;
 
 namespace {
 
-bool contains(const std::string& haystack, std::string_view needle) {
-  return haystack.find(needle) != std::string::npos;
-}
+using proprio::testing_support::contains;
 
 constexpr int kSupersample = 4;
 constexpr int kShift = 8;  // fillPoly fixed-point bits

@@ -19,6 +19,7 @@
 
 #include "proprio/vist/stereo_camera.hpp"
 #include "support/temp_dir.hpp"
+#include "support/text.hpp"
 
 using namespace proprio;
 using namespace proprio::vist;
@@ -26,9 +27,7 @@ using proprio::testing_support::TempDir;
 
 namespace {
 
-bool contains(const std::string& haystack, std::string_view needle) {
-  return haystack.find(needle) != std::string::npos;
-}
+using proprio::testing_support::contains;
 
 // Left half blue-ish, brighter with the frame index; right half green.
 cv::Mat sbs_frame(int index, cv::Size eye) {

@@ -13,6 +13,7 @@
 #include "proprio/core/glove_description.hpp"
 #include "proprio/sim/stereo_image_sim.hpp"
 #include "proprio/sim/subjects.hpp"
+#include "support/stereo.hpp"
 
 using namespace proprio;
 using namespace proprio::sim;
@@ -57,10 +58,7 @@ cv::Vec3b hsv_full_at(const cv::Mat& bgr, double u, double v) {
   return hsv.at<cv::Vec3b>(0, 0);
 }
 
-int hue_distance(int a, int b) {
-  const int d = std::abs(a - b) % 256;
-  return std::min(d, 256 - d);
-}
+using proprio::testing_support::hue_distance;
 
 }  // namespace
 

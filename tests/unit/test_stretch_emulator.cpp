@@ -25,8 +25,11 @@
 #include "proprio/devices/stretch_emulator.hpp"
 #include "proprio/devices/stretch_protocol.hpp"
 #include "proprio/devices/stretch_stream.hpp"
+#include "support/devices.hpp"
 
-namespace proprio::devices {
+// A namespace of this file's own: its helpers share names with the glove
+// emulator tests' (make, Decoded, FaultRun, corpus_dir, ...) in the unity build.
+namespace proprio::devices::stretch_emulator_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -426,15 +429,7 @@ TEST(StretchEmulator, RefusesBadOptionsWithUsableMessages) {
 // ---------------------------------------------------------------------------
 // StretchDevice over the fake link, the emulator served in real time.
 
-template <typename Pred>
-bool wait_until(Pred pred, std::chrono::seconds timeout = 20s) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!pred()) {
-    if (std::chrono::steady_clock::now() > deadline) return false;
-    std::this_thread::sleep_for(1ms);
-  }
-  return true;
-}
+using proprio::testing_support::wait_until;
 
 StretchDeviceOptions test_options() {
   StretchDeviceOptions o;
@@ -733,14 +728,8 @@ TEST(StretchDevice, ASlowConsumerLosesMeasurementsAtTheRingNotTheReader) {
 fs::path corpus_dir() {
   return fs::path(__FILE__).parent_path().parent_path() / "fuzz" / "corpus" / "stretch_protocol";
 }
-void write_bytes(const fs::path& p, const Bytes& b) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
-}
-Bytes read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using proprio::testing_support::read_bytes;
+using proprio::testing_support::write_bytes;
 Bytes concat(const std::vector<StretchEmulatedReport>& reports) {
   Bytes out;
   for (const auto& r : reports) out.insert(out.end(), r.bytes.begin(), r.bytes.end());
@@ -827,4 +816,4 @@ TEST(StretchSeedCorpus, EverySeedStillDecodes) {
 }
 
 }  // namespace
-}  // namespace proprio::devices
+}  // namespace proprio::devices::stretch_emulator_test

@@ -13,13 +13,16 @@
 #include "proprio/core/random.hpp"
 #include "proprio/devices/stretch_protocol.hpp"
 #include "proprio/devices/stretch_stream.hpp"
+#include "support/devices.hpp"
 
-namespace proprio::devices {
+// A namespace of this file's own: its helpers share names with the glove
+// protocol tests' (Feed, Decoded, valid_report, ...) in the unity build.
+namespace proprio::devices::stretch_protocol_test {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes bytes_of(const auto& array) { return Bytes(array.begin(), array.end()); }
+using proprio::testing_support::bytes_of;
 
 std::uint32_t le32(const Bytes& b, std::size_t at) {
   return static_cast<std::uint32_t>(b[at]) | static_cast<std::uint32_t>(b[at + 1]) << 8 |
@@ -783,4 +786,4 @@ TEST(StretchStream, SmallOutputSpanIsNeverOverrun) {
 }
 
 }  // namespace
-}  // namespace proprio::devices
+}  // namespace proprio::devices::stretch_protocol_test

@@ -16,6 +16,7 @@
 #include "proprio/sim/stereo_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/correspondence.hpp"
+#include "support/stereo.hpp"
 
 using namespace proprio;
 using namespace proprio::vist;
@@ -24,13 +25,7 @@ namespace {
 
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
-StereoRig test_rig() {
-  StereoRig rig;
-  rig.camera = PinholeCamera{};  // 1280x720, fx 640, fy 623.5
-  rig.baseline_m = 0.063;
-  rig.T_head_leftcam = Pose::identity();
-  return rig;
-}
+using proprio::testing_support::test_rig;
 
 PredictedMarker facing_marker(const Vec3& p, MarkerHue hue, std::size_t glove_index,
                               HandJoint segment = HandJoint::wrist) {

@@ -14,19 +14,14 @@
 #include "proprio/sim/stereo_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/stereo_matching.hpp"
+#include "support/stereo.hpp"
 
 using namespace proprio;
 using namespace proprio::vist;
 
 namespace {
 
-StereoRig test_rig() {
-  StereoRig rig;
-  rig.camera = PinholeCamera{};  // 1280x720, fx 640, fy 623.5, cx 639.5, cy 359.5
-  rig.baseline_m = 0.063;
-  rig.T_head_leftcam = Pose::identity();
-  return rig;
-}
+using proprio::testing_support::test_rig;
 
 Marker project(const StereoRig& rig, const Vec3& p_in_leftcam, bool right, std::uint8_t hue = 0,
                float area = 100.0f) {

@@ -7,8 +7,8 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::render)
 
   proprio_add_test(render_tests
     LABEL render
-    SOURCES render/test_render.cpp
-    DEPS proprio::render)
+    SOURCES render/test_render.cpp render/test_skinned_hands.cpp
+    DEPS proprio::render nlohmann_json::nlohmann_json)
   target_include_directories(render_tests PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/render)
   # The test replaces global operator new/delete (malloc/free) to count
   # allocations; GCC 12 then flags gtest's `new TestClass` as mismatched.

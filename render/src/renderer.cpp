@@ -56,9 +56,12 @@ Result<VkShaderModule> make_module(VkDevice device, const std::uint32_t* code, s
 }  // namespace
 
 struct Renderer::GpuMesh {
-  Buffer vertices;
-  Buffer indices;
+  Buffer vertices;  // empty for skinned meshes: they are skinned into skin_vertices_
+  Buffer indices;   // skinned: the triangles, then the same with the winding reversed (mirrored draws)
   std::uint32_t index_count = 0;
+  bool skinned = false;
+  std::vector<SkinnedVertex> skin_source;  // bind-space vertices
+  std::size_t joint_count = 0;
 };
 
 struct Renderer::Pass {
@@ -70,7 +73,8 @@ struct Renderer::Pass {
 };
 
 std::string RendererOptions::describe() const {
-  return fmt::format("renderer: near {} m, far {} m, overlay up to {} characters", near_m, far_m, max_hud_characters);
+  return fmt::format("renderer: near {} m, far {} m, overlay up to {} characters, up to {} skinned vertices per frame",
+                     near_m, far_m, max_hud_characters, max_skinned_vertices);
 }
 
 Renderer::Renderer(VulkanContext& context, RendererOptions options) : context_(context), options_(options) {}
@@ -143,6 +147,13 @@ Status Renderer::init() {
                                    VK_BUFFER_USAGE_INDEX_BUFFER_BIT);
   if (!ib) return ib.error();
   hud_indices_ = std::move(ib).value();
+
+  if (options_.max_skinned_vertices > 0) {
+    auto sb = context_.create_buffer(options_.max_skinned_vertices * sizeof(Vertex), VK_BUFFER_USAGE_VERTEX_BUFFER_BIT,
+                                     true);
+    if (!sb) return sb.error().with_context("skinned vertex buffer");
+    skin_vertices_ = std::move(sb).value();
+  }
   return {};
 }
 
@@ -157,6 +168,7 @@ Renderer::~Renderer() {
   meshes_.clear();
   hud_vertices_.reset();
   hud_indices_.reset();
+  skin_vertices_.reset();
   vkDestroyFence(device, in_flight_, nullptr);
   vkDestroyCommandPool(device, pool_, nullptr);
   vkDestroyPipelineLayout(device, lit_layout_, nullptr);
@@ -177,6 +189,32 @@ Result<MeshId> Renderer::upload(const MeshData& mesh) {
   gpu.vertices = std::move(vb).value();
   gpu.indices = std::move(ib).value();
   gpu.index_count = static_cast<std::uint32_t>(mesh.indices.size());
+  meshes_.push_back(std::move(gpu));
+  return static_cast<MeshId>(meshes_.size() - 1);
+}
+
+Result<MeshId> Renderer::upload_skinned(const SkinnedMeshData& mesh) {
+  if (auto s = mesh.validate(); !s) return s.error();
+  if (mesh.indices.empty()) return make_error(Errc::invalid_argument, "mesh '" + mesh.name + "' has no triangles");
+  if (mesh.vertices.size() > options_.max_skinned_vertices) {
+    return make_error(Errc::out_of_range,
+                      fmt::format("skinned mesh '{}' has {} vertices, more than the renderer's {} skinned vertices "
+                                  "per frame (RendererOptions::max_skinned_vertices)",
+                                  mesh.name, mesh.vertices.size(), options_.max_skinned_vertices));
+  }
+  std::vector<std::uint32_t> indices = mesh.indices;
+  for (std::size_t t = 0; t < mesh.indices.size(); t += 3) {
+    indices.insert(indices.end(), {mesh.indices[t], mesh.indices[t + 2], mesh.indices[t + 1]});
+  }
+  auto ib = context_.upload_buffer(indices.data(), indices.size() * sizeof(std::uint32_t),
+                                   VK_BUFFER_USAGE_INDEX_BUFFER_BIT);
+  if (!ib) return ib.error().with_context("uploading skinned mesh '" + mesh.name + "'");
+  GpuMesh gpu;
+  gpu.indices = std::move(ib).value();
+  gpu.index_count = static_cast<std::uint32_t>(mesh.indices.size());
+  gpu.skinned = true;
+  gpu.skin_source = mesh.vertices;
+  gpu.joint_count = mesh.joint_names.size();
   meshes_.push_back(std::move(gpu));
   return static_cast<MeshId>(meshes_.size() - 1);
 }
@@ -372,6 +410,23 @@ std::uint32_t Renderer::fill_hud(const DrawList& draws, std::size_t& vertex_coun
   return static_cast<std::uint32_t>(vertex_count / 4);
 }
 
+std::size_t Renderer::fill_skinned(const DrawList& draws) {
+  auto* out = static_cast<Vertex*>(skin_vertices_.mapped);
+  std::size_t used = 0;
+  for (const SkinnedDrawItem& item : draws.skinned) {
+    const GpuMesh& mesh = meshes_[item.mesh];
+    const std::size_t n = mesh.skin_source.size();
+    if (used + n > options_.max_skinned_vertices) {
+      ++stats_.skinned_draws_dropped;
+      continue;
+    }
+    skin_vertices(mesh.skin_source, std::span(draws.skin_matrices).subspan(item.first_matrix, mesh.joint_count),
+                  std::span(out + used, n));
+    used += n;
+  }
+  return used;
+}
+
 Status Renderer::render(const DrawList& draws, std::span<const View> views, std::span<const ViewTarget> targets,
                         const FrameSync& sync) {
   if (views.size() != targets.size() || views.empty()) {
@@ -383,6 +438,23 @@ Status Renderer::render(const DrawList& draws, std::span<const View> views, std:
       return make_error(Errc::invalid_argument, fmt::format("render: draw item {} names mesh {}, but only {} are "
                                                             "uploaded", i, draws.items[i].mesh, meshes_.size()));
     }
+    if (meshes_[draws.items[i].mesh].skinned) {
+      return make_error(Errc::invalid_argument, fmt::format("render: draw item {} names skinned mesh {}; draw it "
+                                                            "through DrawList::skinned", i, draws.items[i].mesh));
+    }
+  }
+  for (std::size_t i = 0; i < draws.skinned.size(); ++i) {
+    const SkinnedDrawItem& item = draws.skinned[i];
+    if (item.mesh >= meshes_.size() || !meshes_[item.mesh].skinned) {
+      return make_error(Errc::invalid_argument, fmt::format("render: skinned draw {} names mesh {}, which is not a "
+                                                            "skinned mesh (Renderer::upload_skinned)", i, item.mesh));
+    }
+    if (item.first_matrix + meshes_[item.mesh].joint_count > draws.skin_matrices.size()) {
+      return make_error(Errc::invalid_argument,
+                        fmt::format("render: skinned draw {} needs skin matrices {} to {}, but the draw list has {}", i,
+                                    item.first_matrix, item.first_matrix + meshes_[item.mesh].joint_count,
+                                    draws.skin_matrices.size()));
+    }
   }
   for (const auto& t : targets) {
     if (!t.set || t.index >= t.set->size()) return make_error(Errc::invalid_argument, "render: bad view target");
@@ -393,6 +465,7 @@ Status Renderer::render(const DrawList& draws, std::span<const View> views, std:
 
   std::size_t hud_vertex_count = 0;
   const std::uint32_t hud_quads = fill_hud(draws, hud_vertex_count);
+  const std::size_t skinned_vertices = fill_skinned(draws);
 
   vkResetCommandBuffer(cmd_, 0);
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
@@ -435,6 +508,29 @@ Status Renderer::render(const DrawList& draws, std::span<const View> views, std:
       vkCmdBindIndexBuffer(cmd_, mesh.indices.buffer, 0, VK_INDEX_TYPE_UINT32);
       vkCmdDrawIndexed(cmd_, mesh.index_count, 1, 0, 0, 0);
     }
+    // Skinned meshes, already in world space, in the order fill_skinned wrote them.
+    std::size_t skinned_offset = 0;
+    for (const SkinnedDrawItem& item : draws.skinned) {
+      const GpuMesh& mesh = meshes_[item.mesh];
+      if (skinned_offset + mesh.skin_source.size() > options_.max_skinned_vertices) continue;  // dropped
+      LitPush push;
+      push.clip_from_object = clip_from_world;
+      push.world_rows[0] = glm::vec4(1, 0, 0, 0);
+      push.world_rows[1] = glm::vec4(0, 1, 0, 0);
+      push.world_rows[2] = glm::vec4(0, 0, 1, 0);
+      push.color = item.color;
+      vkCmdPushConstants(cmd_, lit_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof push, &push);
+      const VkDeviceSize offset = skinned_offset * sizeof(Vertex);
+      vkCmdBindVertexBuffers(cmd_, 0, 1, &skin_vertices_.buffer, &offset);
+      vkCmdBindIndexBuffer(cmd_, mesh.indices.buffer, 0, VK_INDEX_TYPE_UINT32);
+      // A mirrored skin (negative determinant) turns the triangles inside
+      // out; the reversed copy keeps their front faces outside, which the
+      // lighting's gl_FrontFacing relies on.
+      const bool mirrored =
+          mesh.joint_count > 0 && glm::determinant(glm::mat3(draws.skin_matrices[item.first_matrix])) < 0.0f;
+      vkCmdDrawIndexed(cmd_, mesh.index_count, 1, mirrored ? mesh.index_count : 0, 0, 0);
+      skinned_offset += mesh.skin_source.size();
+    }
     if (hud_quads > 0) {
       vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pass.hud);
       const glm::vec2 size(static_cast<float>(extent.width), static_cast<float>(extent.height));
@@ -462,7 +558,8 @@ Status Renderer::render(const DrawList& draws, std::span<const View> views, std:
   }
   submitted_ = true;
   ++stats_.frames;
-  stats_.draws_last_frame = draws.items.size();
+  stats_.draws_last_frame = draws.items.size() + draws.skinned.size();
+  stats_.skinned_vertices_last_frame = skinned_vertices;
   return {};
 }
 

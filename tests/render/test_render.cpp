@@ -14,6 +14,7 @@
 #include "proprio/core/glm_interop.hpp"
 #include "proprio/core/hand_model.hpp"
 #include "proprio/render/camera.hpp"
+#include "proprio/render/hand_skin.hpp"
 #include "render_fixture.hpp"
 
 // Counts heap allocations while `g_counting` is set (the per-frame test).
@@ -213,6 +214,11 @@ TEST(RendererAllocation, SteadyStateStereoFramesDoNotAllocate) {
   const DrawList scene = primitives_scene(**renderer);
   const HandModel model(*HandShape::from_measurements(0.19, 0.09));
   const HandPose hand = model.forward(Handedness::right, HandAngles{}, Pose{Quat::Identity(), Vec3(0, 1, -0.4)}, 0);
+  // Skinned hands too: the generated right hand, and mirrored as a left hand.
+  auto skinned = SkinnedHand::upload(**renderer, generate_hand_mesh(model, Handedness::right));
+  ASSERT_TRUE(skinned) << skinned.error().message;
+  const HandPose right = model.forward(Handedness::right, HandAngles{}, Pose{Quat::Identity(), Vec3(0.1, 1, -0.4)}, 0);
+  const HandPose left = model.forward(Handedness::left, HandAngles{}, Pose{Quat::Identity(), Vec3(-0.1, 1, -0.4)}, 0);
   const auto views = stereo_views(look_at(Vec3(0.0, 1.25, 0.15), Vec3(0.0, 1.0, -0.5)), 0.063f,
                                    symmetric_fov(glm::radians(60.0f), 1.0f));
   auto target = OffscreenTarget::create(**renderer, 96, 96, 2);
@@ -221,8 +227,12 @@ TEST(RendererAllocation, SteadyStateStereoFramesDoNotAllocate) {
   draws.hud.push_back({"trial 3 of 20", {8, 8}, 1.0f, glm::vec4(1), true});
   auto frame = [&] {
     draws.items.clear();
+    draws.skinned.clear();
+    draws.skin_matrices.clear();
     draws.items.insert(draws.items.end(), scene.items.begin(), scene.items.end());
     append_hand(draws, hand, *unit, HandStyle{});
+    append_skinned_hand(draws, right, *skinned, skin_color_for(Handedness::right));
+    append_skinned_hand(draws, left, *skinned, skin_color_for(Handedness::left));
     return (*renderer)->render(draws, views, (*target)->views()).ok();
   };
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(frame());  // warm-up: capacities grow once
@@ -235,7 +245,10 @@ TEST(RendererAllocation, SteadyStateStereoFramesDoNotAllocate) {
   g_counting = false;
   ASSERT_TRUE(ok);
   EXPECT_EQ(g_allocations.load(), 0) << "heap allocations in 20 steady-state stereo frames";
-  EXPECT_EQ((*renderer)->stats().draws_last_frame, draws.items.size());
+  EXPECT_EQ((*renderer)->stats().draws_last_frame, draws.items.size() + 2);
+  EXPECT_EQ(draws.skinned.size(), 2u);
+  EXPECT_GT((*renderer)->stats().skinned_vertices_last_frame, 3000u);
+  EXPECT_EQ((*renderer)->stats().skinned_draws_dropped, 0u);
 }
 
 }  // namespace

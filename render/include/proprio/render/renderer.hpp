@@ -19,6 +19,7 @@
 #include "proprio/render/camera.hpp"
 #include "proprio/render/context.hpp"
 #include "proprio/render/mesh.hpp"
+#include "proprio/render/skinned_mesh.hpp"
 
 namespace proprio::render {
 
@@ -28,6 +29,16 @@ struct DrawItem {
   MeshId mesh = 0;
   glm::mat4 T_world_object{1.0f};  // may scale (bones, unit primitives)
   glm::vec4 color{0.8f, 0.8f, 0.8f, 1.0f};  // linear RGB; alpha < 1 blends
+};
+
+// A skinned mesh (Renderer::upload_skinned) skinned on the CPU each frame:
+// its joints' skin matrices (T_world_joint * inverse_bind, one per skin
+// joint, in the mesh's joint order) start at `first_matrix` in
+// DrawList::skin_matrices. Drawn after the static items, in order.
+struct SkinnedDrawItem {
+  MeshId mesh = 0;
+  std::uint32_t first_matrix = 0;
+  glm::vec4 color{0.8f, 0.8f, 0.8f, 1.0f};
 };
 
 // A line or block of text in the overlay, in pixels from the target's
@@ -43,11 +54,15 @@ struct HudText {
 struct DrawList {
   std::vector<DrawItem> items;
   std::vector<HudText> hud;
+  std::vector<SkinnedDrawItem> skinned;
+  std::vector<glm::mat4> skin_matrices;
   glm::vec4 clear_color{0.08f, 0.09f, 0.11f, 1.0f};
   // Keeps capacity, so refilling it every frame does not allocate.
   void clear() {
     items.clear();
     hud.clear();
+    skinned.clear();
+    skin_matrices.clear();
   }
 };
 
@@ -101,6 +116,9 @@ struct FrameSync {
 
 struct RendererOptions {
   std::size_t max_hud_characters = 4096;
+  // Skinned vertices per frame, all skinned draws together (a generated
+  // hand has about 3000); draws past it are skipped and counted.
+  std::size_t max_skinned_vertices = 65536;
   float near_m = 0.02f;
   float far_m = 50.0f;
   std::string describe() const;
@@ -108,7 +126,9 @@ struct RendererOptions {
 
 struct RenderStats {
   std::uint64_t frames = 0;
-  std::size_t draws_last_frame = 0;
+  std::size_t draws_last_frame = 0;          // static and skinned
+  std::size_t skinned_vertices_last_frame = 0;
+  std::uint64_t skinned_draws_dropped = 0;  // over max_skinned_vertices, since creation
 };
 
 class Renderer {
@@ -120,6 +140,10 @@ class Renderer {
 
   // Uploads a mesh; its id is valid for the renderer's lifetime.
   Result<MeshId> upload(const MeshData& mesh);
+  // Uploads a skinned mesh (its indices; the vertices stay on the CPU and
+  // are skinned each frame into a host-visible buffer). Draw it with
+  // DrawList::skinned, not as a DrawItem.
+  Result<MeshId> upload_skinned(const SkinnedMeshData& mesh);
   std::size_t mesh_count() const noexcept;
 
   // Records and submits one frame: views[i] into targets[i]. Returns once
@@ -142,6 +166,8 @@ class Renderer {
   explicit Renderer(VulkanContext& context, RendererOptions options);
   Status init();
   std::uint32_t fill_hud(const DrawList& draws, std::size_t& vertex_count);
+  // Skins every skinned draw that fits into skin_vertices_; returns the vertices written.
+  std::size_t fill_skinned(const DrawList& draws);
 
   VulkanContext& context_;
   RendererOptions options_;
@@ -158,6 +184,7 @@ class Renderer {
   Buffer hud_vertices_;
   Buffer hud_indices_;
   std::vector<char> hud_scratch_;  // stb_easy_font's output, reused
+  Buffer skin_vertices_;           // host-visible, rewritten each frame (one frame in flight)
   RenderStats stats_;
 };
 

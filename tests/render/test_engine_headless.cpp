@@ -4,12 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <functional>
 
 #include "golden.hpp"
 #include "proprio/engine/app.hpp"
 #include "proprio/engine/scripted_hands.hpp"
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
+#include "proprio/render/hand_skin.hpp"
 
 namespace proprio::engine {
 namespace {
@@ -19,7 +21,8 @@ struct HeadlessRun {
   std::filesystem::path dir;
 };
 
-HeadlessRun run_half_cylinder(int frames, bool haptics, const std::string& name) {
+HeadlessRun run_half_cylinder(int frames, bool haptics, const std::string& name,
+                              const std::function<void(AppOptions&)>& tweak = {}) {
   auto scene = Scene::preset("half-cylinder");
   EXPECT_TRUE(scene);
   AppOptions o;
@@ -33,6 +36,7 @@ HeadlessRun run_half_cylinder(int frames, bool haptics, const std::string& name)
   o.validation = true;
   o.out_dir = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / name;
   std::filesystem::remove_all(o.out_dir);
+  if (tweak) tweak(o);
   AppInputs in;
   in.hand_model = std::make_shared<const HandModel>(*HandShape::from_measurements(0.19, 0.09));
   in.simulated_clock = std::make_shared<ManualClock>(kNsPerSecond);
@@ -127,6 +131,54 @@ TEST(EngineHeadless, FrameHookBlacksOutTheSceneDrawsMarkersAndStops) {
   auto normal = render::read_png(report->images[0]);
   ASSERT_TRUE(normal);
   EXPECT_GT(normal->at(2, 2)[2], 10);  // the usual background
+}
+
+// The skinned hand look: the proxy (solid) and the tracked ghost as skinned
+// hands, generated or from a glTF file; the frames differ from the joint look.
+TEST(EngineHeadless, SkinnedHandLookDrawsGeneratedAndGltfHands) {
+  EXPECT_EQ(parse_hand_look("skinned"), HandLook::skinned);
+  EXPECT_EQ(parse_hand_look("joints"), HandLook::joints);
+  EXPECT_FALSE(parse_hand_look("mesh"));
+  const HeadlessRun joints = run_half_cylinder(8, true, "engine_hands_joints");
+  const HeadlessRun generated =
+      run_half_cylinder(8, true, "engine_hands_skinned", [](AppOptions& o) { o.hand_look = HandLook::skinned; });
+  const auto file = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / "engine_hand.gltf";
+  const HandModel model(*HandShape::from_measurements(0.19, 0.09));
+  ASSERT_TRUE(render::save_skinned_gltf(render::generate_hand_mesh(model, Handedness::right), file));
+  const HeadlessRun from_file = run_half_cylinder(8, true, "engine_hands_gltf", [&](AppOptions& o) {
+    o.hand_look = HandLook::skinned;
+    o.hand_gltf = file;
+  });
+  ASSERT_EQ(joints.report.images.size(), 8u);
+  ASSERT_EQ(generated.report.images.size(), 8u);
+  ASSERT_EQ(from_file.report.images.size(), 8u);
+  auto a = render::read_png(joints.report.images.back());
+  auto b = render::read_png(generated.report.images.back());
+  auto c = render::read_png(from_file.report.images.back());
+  ASSERT_TRUE(a && b && c);
+  auto joints_vs_skinned = render::compare_images(*a, *b);
+  ASSERT_TRUE(joints_vs_skinned);
+  EXPECT_GT(joints_vs_skinned->fraction_over_threshold, 0.005);  // the hands look different
+  auto generated_vs_file = render::compare_images(*b, *c);
+  ASSERT_TRUE(generated_vs_file);
+  EXPECT_EQ(generated_vs_file->max, 0);  // the file is the generated hand
+
+  AppOptions bad;
+  bad.hand_gltf = file;  // with the joint look
+  EXPECT_FALSE(bad.validate());
+  auto scene = Scene::preset("half-cylinder");
+  ASSERT_TRUE(scene);
+  AppOptions missing;
+  missing.output = OutputMode::headless;
+  missing.software_renderer = true;
+  missing.frames = 1;
+  missing.hand_look = HandLook::skinned;
+  missing.hand_gltf = "no_such_hand.gltf";
+  auto app = App::create(std::move(*scene), AppInputs{}, missing);
+  ASSERT_TRUE(app) << app.error().message;
+  auto report = (*app)->run();
+  ASSERT_FALSE(report);
+  EXPECT_NE(report.error().message.find("no_such_hand.gltf"), std::string::npos) << report.error().message;
 }
 
 }  // namespace

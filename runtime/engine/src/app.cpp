@@ -35,12 +35,27 @@ std::string_view to_string(OutputMode mode) noexcept {
   return "?";
 }
 
+std::string_view to_string(HandLook look) noexcept {
+  switch (look) {
+    case HandLook::joints: return "joints";
+    case HandLook::skinned: return "skinned";
+  }
+  return "?";
+}
+
+std::optional<HandLook> parse_hand_look(std::string_view s) noexcept {
+  if (s == "joints") return HandLook::joints;
+  if (s == "skinned") return HandLook::skinned;
+  return std::nullopt;
+}
+
 std::string AppOptions::describe() const {
   return fmt::format("app: output {}, {}x{} per eye, {}, {} frames at {} Hz (headless), camera {}, renderer {}, "
-                     "validation {}, haptic hand {}, out '{}'",
+                     "validation {}, haptic hand {}, hands drawn as {}{}, out '{}'",
                      to_string(output), width, height, stereo ? "stereo" : "mono", frames, frame_rate_hz,
                      camera == HeadlessCamera::head ? "head" : "orbit", software_renderer ? "lavapipe" : "automatic",
-                     validation ? "on" : "off", to_string(hand), out_dir.string());
+                     validation ? "on" : "off", to_string(hand), to_string(hand_look),
+                     hand_gltf.empty() ? std::string() : " from '" + hand_gltf.string() + "'", out_dir.string());
 }
 
 Status AppOptions::validate() const {
@@ -52,6 +67,11 @@ Status AppOptions::validate() const {
     return make_error(Errc::invalid_argument, "frame rate must be in (0, 1000] Hz");
   }
   if (!(ipd_m >= 0 && ipd_m < 0.2)) return make_error(Errc::invalid_argument, "ipd must be in [0, 0.2) m");
+  if (!hand_gltf.empty() && hand_look != HandLook::skinned) {
+    return make_error(Errc::invalid_argument, fmt::format("a glTF hand ('{}') is drawn only with the skinned hand look, "
+                                                          "but the hand look is '{}'", hand_gltf.string(),
+                                                          to_string(hand_look)));
+  }
   return {};
 }
 
@@ -228,7 +248,7 @@ Result<AppReport> App::Impl::run_headless() {
   if (!ctx) return ctx.error();
   auto renderer = render::Renderer::create(**ctx);
   if (!renderer) return renderer.error();
-  auto drawer = SceneDrawer::create(**renderer, scene);
+  auto drawer = SceneDrawer::create(**renderer, scene, options, *hand_model);
   if (!drawer) return drawer.error();
   const std::uint32_t eyes = options.stereo ? 2 : 1;
   auto target = render::OffscreenTarget::create(**renderer, options.width, options.height, eyes);
@@ -336,7 +356,7 @@ Result<AppReport> App::Impl::run_window() {
   if (!ctx) return ctx.error();
   auto renderer = render::Renderer::create(**ctx);
   if (!renderer) return renderer.error();
-  auto drawer = SceneDrawer::create(**renderer, scene);
+  auto drawer = SceneDrawer::create(**renderer, scene, options, *hand_model);
   if (!drawer) return drawer.error();
   auto target = render::WindowTarget::create(**renderer, **window);
   if (!target) return target.error();

@@ -27,8 +27,19 @@ render::MeshData mesh_for(const Entity& e) {
 
 }  // namespace
 
-Result<SceneDrawer> SceneDrawer::create(render::Renderer& renderer, const Scene& scene) {
+Result<SceneDrawer> SceneDrawer::create(render::Renderer& renderer, const Scene& scene, const AppOptions& options,
+                                        const HandModel& hand_model) {
   SceneDrawer d;
+  if (options.hand_look == HandLook::skinned) {
+    Result<render::SkinnedMeshData> mesh =
+        options.hand_gltf.empty()
+            ? Result<render::SkinnedMeshData>(render::generate_hand_mesh(hand_model, Handedness::right))
+            : render::load_skinned_gltf(options.hand_gltf);
+    if (!mesh) return mesh.error().with_context("skinned hand");
+    auto hand = render::SkinnedHand::upload(renderer, *mesh);
+    if (!hand) return hand.error().with_context("skinned hand");
+    d.skinned_hand_ = std::move(hand).value();
+  }
   auto unit = render::UnitMeshes::upload(renderer);
   if (!unit) return unit.error();
   d.unit_ = *unit;
@@ -88,6 +99,12 @@ void SceneDrawer::append_marker(render::DrawList& draws, const FrameContext::Mar
 }
 
 void SceneDrawer::append_hand(render::DrawList& draws, const HandPose& pose, bool ghost) const {
+  if (skinned_hand_) {
+    glm::vec4 color = render::skin_color_for(pose.hand);
+    if (ghost) color.a = 0.3f;
+    render::append_skinned_hand(draws, pose, *skinned_hand_, color);
+    return;
+  }
   render::HandStyle style = render::HandStyle::for_hand(pose.hand);
   if (ghost) {
     style.joint_color.a = style.bone_color.a = style.untracked_color.a = 0.3f;

@@ -6,13 +6,17 @@
 #include "proprio/engine/app.hpp"
 #include "proprio/engine/scene.hpp"
 #include "proprio/render/hand_drawing.hpp"
+#include "proprio/render/hand_skin.hpp"
 #include "proprio/render/renderer.hpp"
 
 namespace proprio::engine {
 
 class SceneDrawer {
  public:
-  static Result<SceneDrawer> create(render::Renderer& renderer, const Scene& scene);
+  // Hands as options.hand_look says; the skinned look loads options.hand_gltf
+  // or generates a hand from `hand_model`.
+  static Result<SceneDrawer> create(render::Renderer& renderer, const Scene& scene, const AppOptions& options,
+                                    const HandModel& hand_model);
 
   // Entity i at `T_world_entity[i]` (the simulation moves free bodies).
   void append_scene(render::DrawList& draws, const std::vector<Pose>& T_world_entity) const;
@@ -26,6 +30,7 @@ class SceneDrawer {
   std::vector<render::MeshId> meshes_;
   std::vector<glm::vec4> colors_;
   render::UnitMeshes unit_;
+  std::optional<render::SkinnedHand> skinned_hand_;  // the skinned look
   std::optional<double> floor_height_m_;
 };
 

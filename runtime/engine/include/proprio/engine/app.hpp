@@ -34,6 +34,13 @@ namespace proprio::engine {
 enum class OutputMode { automatic, xr, window, headless };
 std::string_view to_string(OutputMode mode) noexcept;
 
+// How hands are drawn: `joints` (a sphere per joint, bone cylinders, axis
+// triads) or `skinned` (a skinned glTF hand driven by the 26 joints: the hand
+// generated from the hand model, or AppOptions::hand_gltf).
+enum class HandLook { joints, skinned };
+std::string_view to_string(HandLook look) noexcept;
+std::optional<HandLook> parse_hand_look(std::string_view s) noexcept;  // "joints", "skinned"
+
 enum class HeadlessCamera {
   head,   // a standing viewer's eyes, looking at the scene's focus
   orbit,  // circling the focus once over the run
@@ -57,6 +64,11 @@ struct AppOptions {
 #endif
   Handedness hand = Handedness::right;  // the hand that drives the haptic proxy
   bool show_tracked_hand = true;   // the tracked hand as a translucent ghost when a proxy is shown
+  HandLook hand_look = HandLook::joints;
+  // With hand_look = skinned: a skinned glTF hand whose skin joints carry the
+  // OpenXR joint names (docs/engine.md); empty: the hand generated from the
+  // hand model (AppInputs::hand_model). Either hand is mirrored for the other side.
+  std::filesystem::path hand_gltf;
   bool hud = true;
   std::string describe() const;
   Status validate() const;

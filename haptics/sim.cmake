@@ -5,4 +5,5 @@ list(APPEND PROPRIO_HAPTICS_SOURCES
   ${CMAKE_CURRENT_SOURCE_DIR}/src/servo_loop.cpp
   ${CMAKE_CURRENT_SOURCE_DIR}/src/touch_script.cpp
   ${CMAKE_CURRENT_SOURCE_DIR}/src/emulated_fingertip.cpp
+  ${CMAKE_CURRENT_SOURCE_DIR}/src/hid_channels.cpp
 )

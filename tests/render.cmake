@@ -20,7 +20,7 @@ endif()
 
 if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine)
   proprio_add_test(engine_scene_tests
-    SOURCES unit/test_engine_scene.cpp
+    SOURCES unit/test_engine_scene.cpp unit/test_recentred_hands.cpp
     DEPS proprio::engine)
 
   proprio_add_test(engine_tests

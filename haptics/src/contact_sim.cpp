@@ -105,11 +105,6 @@ namespace {
 // Left hands mirror the right through the wrist frame's YZ plane (HandModel).
 Pose mirrored(const Pose& T) { return {Quat(T.q.w(), T.q.x(), -T.q.y(), -T.q.z()), Vec3(-T.p.x(), T.p.y(), T.p.z())}; }
 
-std::string finger_name(Finger f) {
-  static constexpr const char* kNames[] = {"thumb", "index", "middle", "ring", "little"};
-  return kNames[static_cast<std::size_t>(f)];
-}
-
 // Per DOF: the hinge's name.
 std::string dof_joint_name(std::size_t dof) { return "proxy_" + std::string(to_string(static_cast<HandDof>(dof))); }
 
@@ -361,7 +356,7 @@ Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, 
     const auto f = static_cast<Finger>(fi);
     const HandShape::Finger& g = shape.fingers[fi];
     const std::size_t d = first_dof_of(f);
-    const std::string fname = finger_name(f);
+    const std::string fname(to_string(f));
     const auto radius = [&](std::size_t k) { return 0.5 * (g.joint_radius_m[k] + g.joint_radius_m[k + 1]); };
     std::string indent = "      ";
     std::size_t bones_open = 0;
@@ -639,7 +634,7 @@ Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model,
   impl->geom_hand.assign(static_cast<std::size_t>(m->ngeom), false);
   impl->object_body_of_geom.assign(static_cast<std::size_t>(m->ngeom), -1);
   for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
-    const std::string distal = "proxy_" + finger_name(static_cast<Finger>(fi)) + "_distal";
+    const std::string distal = "proxy_" + std::string(to_string(static_cast<Finger>(fi))) + "_distal";
     impl->tip_body[fi] = mj_name2id(m, mjOBJ_BODY, distal.c_str());
     impl->geom_finger[static_cast<std::size_t>(mj_name2id(m, mjOBJ_GEOM, distal.c_str()))] = static_cast<int>(fi);
   }

@@ -17,6 +17,59 @@ if(NOT out MATCHES "12 frames \\(headless\\)")
   message(FATAL_ERROR "unexpected report:\n${out}")
 endif()
 
+if(NOT out MATCHES "tracked hand in 12 of them")
+  message(FATAL_ERROR "the scripted touch hand must be there in every frame:\n${out}")
+endif()
+
+# The skinned hand look, and the real-time sources the OpenXR layer also
+# serves: the stretch glove's simulated wearer and a VIST session through the
+# tracker. These run in real time, so the first frames may come before the
+# first pose: most frames, not all, must have the hand.
+execute_process(
+  COMMAND ${PROPRIO} run half-cylinder --headless --frames 30 --size 160x90 --mono --software --hands glove
+          --hand-look skinned --haptics none --out ${WORK_DIR}/glove
+  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 0 OR NOT out MATCHES "tracked hand in ([0-9]+) of them")
+  message(FATAL_ERROR "proprio run --hands glove failed (${rc}):\n${out}\n${err}")
+endif()
+if(CMAKE_MATCH_1 LESS 15)
+  message(FATAL_ERROR "the simulated glove wearer's hand was in only ${CMAKE_MATCH_1} of 30 frames:\n${out}")
+endif()
+
+execute_process(
+  COMMAND ${PROPRIO} sim-vist --subject 5 --seconds 4 --out ${WORK_DIR}/vist.prec --force
+  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "proprio sim-vist failed (${rc}):\n${out}\n${err}")
+endif()
+execute_process(
+  COMMAND ${PROPRIO} run half-cylinder --headless --frames 40 --size 160x90 --mono --software
+          --hands vist ${WORK_DIR}/vist.prec --haptics none --out ${WORK_DIR}/vist
+  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL 0 OR NOT out MATCHES "tracked hand in ([0-9]+) of them")
+  message(FATAL_ERROR "proprio run --hands vist failed (${rc}):\n${out}\n${err}")
+endif()
+if(CMAKE_MATCH_1 LESS 10)
+  message(FATAL_ERROR "the VIST-tracked hand was in only ${CMAKE_MATCH_1} of 40 frames:\n${out}")
+endif()
+
+# What a user gets wrong gets an error that says what to do.
+foreach(case
+    "--hands;vist|VIST session recording"
+    "--hands;glove;device|--glove-calibration"
+    "--hands;glove;bluetooth|choose sim"
+    "--hand-look;skined|choose joints, skinned"
+    "--haptics;hid;--hid-device;pinky=X|pinky")
+  string(REPLACE "|" ";" parts "${case}")
+  list(GET parts -1 expected)
+  list(REMOVE_AT parts -1)
+  execute_process(COMMAND ${PROPRIO} run half-cylinder --headless --frames 1 ${parts}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(rc EQUAL 0 OR NOT err MATCHES "${expected}")
+    message(FATAL_ERROR "proprio run ${parts} must fail saying '${expected}' (${rc}):\n${out}\n${err}")
+  endif()
+endforeach()
+
 execute_process(COMMAND ${PROPRIO} run nope.toml --headless RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(rc EQUAL 0 OR NOT err MATCHES "nope.toml")
   message(FATAL_ERROR "a missing scene file must fail naming it (${rc}):\n${err}")

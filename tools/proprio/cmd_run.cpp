@@ -1,6 +1,7 @@
 // proprio run SCENE: the engine (scene + hands + haptics + renderer) to an
 // HMD through OpenXR, a desktop window, or PNG frames headless.
 #include <csignal>
+#include <filesystem>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -14,6 +15,8 @@
 #include "proprio/engine/scripted_hands.hpp"
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
+#include "proprio/haptics/hid_channels.hpp"
+#include "proprio/openxr_layer/hand_sources.hpp"
 #include "proprio/sim/sim_hand_source.hpp"
 
 namespace proprio::cli {
@@ -21,11 +24,8 @@ namespace {
 
 using engine::OutputMode;
 
-Result<Finger> parse_finger(const std::string& s) {
-  static const char* names[] = {"thumb", "index", "middle", "ring", "little"};
-  for (std::size_t i = 0; i < 5; ++i) {
-    if (s == names[i]) return static_cast<Finger>(i);
-  }
+Result<Finger> finger_from_arg(const std::string& s) {
+  if (auto f = proprio::parse_finger(s)) return *f;
   return make_error(Errc::invalid_argument, "unknown finger '" + s + "' (thumb, index, middle, ring, little)");
 }
 
@@ -86,6 +86,15 @@ Result<engine::AppOptions> app_options_from(const RunArgs& a) {
   o.validation = o.validation || a.validation;  // debug builds validate anyway
   o.hud = !a.no_hud;
   o.hand = *parse_handedness(a.hand);
+  if (auto look = engine::parse_hand_look(a.hand_look)) {
+    o.hand_look = *look;
+  } else if (const auto ext = std::filesystem::path(a.hand_look).extension(); ext == ".gltf" || ext == ".glb") {
+    o.hand_look = engine::HandLook::skinned;
+    o.hand_gltf = a.hand_look;
+  } else {
+    return make_error(Errc::invalid_argument,
+                      "--hand-look '" + a.hand_look + "': choose joints, skinned or a glTF hand (.gltf, .glb)");
+  }
   return o;
 }
 
@@ -95,13 +104,15 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
   auto shape = HandShape::from_measurements(0.19, 0.09);
   if (!shape) return shape.error();
   in.hand_model = std::make_shared<const HandModel>(*shape);
+  const std::string& kind = a.hands.front();
   // Headless runs step simulated time unless told otherwise; live sources
-  // (window, XR) run on the monotonic clock.
-  const bool simulated = o.output == OutputMode::headless && !a.realtime;
+  // (window, XR) run on the monotonic clock, as do VIST and the glove, whose
+  // trackers run on their own threads in real time.
+  const bool real_time_source = kind == "vist" || kind == "glove";
+  const bool simulated = o.output == OutputMode::headless && !a.realtime && !real_time_source;
   if (simulated) in.simulated_clock = std::make_shared<ManualClock>(kNsPerSecond);
   const Clock& clock = simulated ? static_cast<const Clock&>(*in.simulated_clock) : MonotonicClock::instance();
 
-  const std::string& kind = a.hands.front();
   if (kind == "touch") {
     in.hands = std::make_shared<engine::ScriptedTouchSource>(in.hand_model, o.hand, scene, clock.now_ns());
   } else if (kind == "sim") {
@@ -124,12 +135,46 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
     auto replay = std::make_shared<ReplayHandSource>(std::move(*src));
     replay->set_time_offset_ns(clock.now_ns() - replay->file_time_range().first_ns);
     in.hands = replay;
+  } else if (real_time_source) {
+    // The OpenXR layer's sources, configured as a [[source]] table would be.
+    openxr_layer::SourceConfig sc;
+    sc.hands = {o.hand};
+    sc.space = openxr_layer::ReferenceSpace::local;
+    const std::string arg = a.hands.size() > 1 ? a.hands[1] : std::string();
+    if (kind == "vist") {
+      if (arg.empty()) {
+        return make_error(Errc::invalid_argument, "--hands vist needs a VIST session recording (proprio sim-vist, or "
+                                                  "one recorded live): --hands vist FILE.prec");
+      }
+      sc.type = openxr_layer::SourceType::vist;
+      sc.path = arg;
+    } else {
+      sc.type = openxr_layer::SourceType::glove;
+      sc.input = arg.empty() ? "sim" : arg;
+      if (sc.input != "sim" && sc.input != "device") {
+        return make_error(Errc::invalid_argument, "--hands glove '" + arg + "': choose sim (a simulated wearer) or "
+                                                  "device (the read-out board on USB, with --glove-calibration)");
+      }
+      if (sc.input == "device" && a.glove_calibration.empty()) {
+        return make_error(Errc::invalid_argument, "--hands glove device needs the wearer's calibration: "
+                                                  "--glove-calibration FILE (from 'proprio calibrate glove')");
+      }
+      sc.calibration = a.glove_calibration;
+      sc.subject = a.sim_subject;
+      sc.seed = a.seed;
+    }
+    auto src = openxr_layer::start_hand_source(sc, 50 * kNsPerMillisecond);
+    if (!src) return src.error();
+    std::shared_ptr<HandSource> source = std::move(*src);
+    in.hands = a.no_recentre ? source
+                             : std::make_shared<engine::RecentredHandSource>(source,
+                                                                             engine::recentred_wrist_target(scene));
   } else if (kind == "xr" || kind == "none") {
     // xr: the runtime's XR_EXT_hand_tracking (in --xr sessions); none: no hand.
   } else {
-    return make_error(Errc::invalid_argument,
-                      "--hands '" + kind + "': choose touch, sim, replay FILE, xr or none (vist and glove feed the "
-                      "engine through the OpenXR layer: run the layer with that source and use --xr --hands xr)");
+    return make_error(Errc::invalid_argument, "--hands '" + kind +
+                                                  "': choose touch, sim, replay FILE, vist FILE, glove [sim|device], "
+                                                  "xr or none");
   }
 
   if (a.haptics == "sim") {
@@ -137,17 +182,48 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
     if (!model) return model.error();
     std::shared_ptr<const haptics::FingertipDeviceModel> shared(std::move(*model));
     for (const auto& f : a.fingers) {
-      auto finger = parse_finger(f);
+      auto finger = finger_from_arg(f);
       if (!finger) return finger.error();
       auto sink = haptics::EmulatedFingertip::create(shared);
       if (!sink) return sink.error();
       in.haptic_channels.push_back({*finger, shared, std::shared_ptr<haptics::EmulatedFingertip>(std::move(*sink))});
     }
+  } else if (a.haptics == "hid") {
+    auto channels = open_hid_haptics(a);
+    if (!channels) return channels.error();
+    in.haptic_channels = std::move(*channels);
   } else if (a.haptics != "none") {
-    return make_error(Errc::invalid_argument, "--haptics '" + a.haptics + "': choose sim or none (real devices: "
-                      "proprio haptics devices / haptics test; HID in the engine is not wired yet)");
+    return make_error(Errc::invalid_argument, "--haptics '" + a.haptics + "': choose sim, hid or none");
   }
   return in;
+}
+
+Result<std::vector<haptics::ServoChannel>> open_hid_haptics(const RunArgs& a) {
+  haptics::HidChannelOptions ho;
+  ho.fingers.clear();
+  for (const auto& f : a.fingers) {
+    auto finger = finger_from_arg(f);
+    if (!finger) return finger.error();
+    ho.fingers.push_back(*finger);
+  }
+  for (const auto& b : a.hid_devices) {
+    auto binding = haptics::parse_hid_binding(b);
+    if (!binding) return binding.error().with_context("--hid-device");
+    ho.bindings.push_back(*binding);
+  }
+  ho.hand = *parse_handedness(a.hand);
+  if (a.device_given) ho.model_file = a.device;
+  ho.model_dir = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics";
+  auto listed = devices::enumerate_fingertip_devices();
+  if (!listed) return listed.error();
+  auto channels = haptics::open_hid_channels(ho, *listed);
+  if (!channels) return channels.error();
+  std::vector<haptics::ServoChannel> out;
+  for (auto& c : *channels) {
+    std::printf("haptics: %s\n", c.describe().c_str());
+    out.push_back(std::move(c.channel));
+  }
+  return out;
 }
 
 Result<engine::AppReport> run_app_until_done(engine::App& app) {
@@ -181,11 +257,27 @@ void add_run_command(CLI::App& app, int& exit_code) {
   window->excludes(headless);
   cmd->add_option("--hands", a->hands,
                   "hand source: touch (a scripted index finger pressing the scene's focus), sim (the procedural "
-                  "hand), replay FILE.prec, xr (the runtime's XR_EXT_hand_tracking) or none")
+                  "hand), replay FILE.prec, vist FILE.prec (a VIST session through the tracker), glove [sim|device] "
+                  "(the stretch glove: a simulated wearer, or the read-out board on USB), xr (the runtime's "
+                  "XR_EXT_hand_tracking) or none. vist and glove run in real time, also headless")
       ->expected(1, 2)
       ->capture_default_str();
-  cmd->add_option("--haptics", a->haptics, "sim (emulated fingertip devices) or none")->capture_default_str();
-  cmd->add_option("--device", a->device, "fingertip device model (config/haptics/*.toml)")->capture_default_str();
+  cmd->add_flag("--no-recentre", a->no_recentre,
+                "--hands vist/glove: keep the source's own coordinates (by default the first wrist pose is moved "
+                "above the scene's focus, and the hand keeps that offset)");
+  cmd->add_option("--glove-calibration", a->glove_calibration,
+                  "--hands glove device: the wearer's min-max calibration (proprio calibrate glove)");
+  cmd->add_option("--haptics", a->haptics,
+                  "sim (emulated fingertip devices), hid (fingertip devices on USB, one per --fingers) or none")
+      ->check(CLI::IsMember({"sim", "hid", "none"}))
+      ->capture_default_str();
+  auto* device_option = cmd->add_option("--device", a->device,
+                                        "fingertip device model (config/haptics/*.toml); hid: default by the kind "
+                                        "each device reports")
+                            ->capture_default_str();
+  cmd->add_option("--hid-device", a->hid_devices,
+                  "--haptics hid: FINGER=SERIAL or FINGER=/dev/hidrawN (repeatable); unbound fingers take a device "
+                  "assigned to them, else the next free one (proprio haptics devices lists them)");
   cmd->add_option("--fingers", a->fingers, "fingers with a device")->delimiter(',')->capture_default_str();
   cmd->add_option("--frames", a->frames, "frames to render (default: 90 headless, until closed otherwise)");
   cmd->add_option("--fps", a->fps, "headless frame rate (simulated time step)")->capture_default_str();
@@ -199,7 +291,11 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--hand", a->hand, "the hand that drives the haptic proxy")
       ->check(CLI::IsMember({"left", "right"}))
       ->capture_default_str();
-  cmd->add_option("--sim-subject", a->sim_subject, "--hands sim: simulated subject")->capture_default_str();
+  cmd->add_option("--hand-look", a->hand_look,
+                  "how hands are drawn: joints (spheres and bones with axis triads), skinned (a hand mesh generated "
+                  "from the hand model), or a glTF hand whose skin joints carry OpenXR joint names")
+      ->capture_default_str();
+  cmd->add_option("--sim-subject", a->sim_subject, "--hands sim / glove sim: simulated subject")->capture_default_str();
   auto* seed_option = cmd->add_option("--seed", a->seed, "--hands sim: motion seed; studies: the study's seed "
                                                          "(default: the design's)")
                           ->capture_default_str();
@@ -216,8 +312,9 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--force", a->force, "overwrite session data already in --out");
   cmd->add_option("--calibration", a->calibration,
                   "perception-threshold: the HMD calibration to apply (written by 'run hmd-calibration')");
-  cmd->callback([a, &exit_code, out_option, seed_option] {
+  cmd->callback([a, &exit_code, out_option, seed_option, device_option] {
     a->out_given = out_option->count() > 0;
+    a->device_given = device_option->count() > 0;
     a->seed_given = seed_option->count() > 0;
     exit_code = run(*a);
   });

@@ -104,9 +104,14 @@ int run_live(const RunArgs& a, const PerceptionProtocol& protocol, const study::
     auto sink = haptics::EmulatedFingertip::create(shared);
     if (!sink) return report_error(sink.error());
     channel = std::make_unique<ForceChannel>(shared, std::shared_ptr<haptics::FingertipSink>(std::move(*sink)));
+  } else if (a.haptics == "hid") {
+    RunArgs one = a;  // the experiment renders on one fingertip: the first of --fingers
+    one.fingers.resize(1);
+    auto channels = open_hid_haptics(one);
+    if (!channels) return report_error(channels.error());
+    channel = std::make_unique<ForceChannel>(channels->front().model, channels->front().sink);
   } else if (a.haptics != "none") {
-    return report_error(make_error(Errc::invalid_argument, "--haptics: sim or none (a HID fingertip device is not "
-                                                           "wired into the live experiment yet)"));
+    return report_error(make_error(Errc::invalid_argument, "--haptics: sim, hid or none"));
   }
   study::SessionOptions so;
   so.out_dir = out;

@@ -9,6 +9,7 @@
 
 #include "proprio/core/result.hpp"
 #include "proprio/engine/app.hpp"
+#include "proprio/haptics/servo_loop.hpp"
 
 #ifndef PROPRIO_SOURCE_DIR
 #define PROPRIO_SOURCE_DIR "."
@@ -22,6 +23,8 @@ struct RunArgs {
   std::vector<std::string> hands{"touch"};
   std::string haptics = "sim";
   std::string device = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml";
+  bool device_given = false;             // --device on the command line (hid: else each device's kind)
+  std::vector<std::string> hid_devices;  // --haptics hid: FINGER=SERIAL or FINGER=/dev/hidrawN
   std::vector<std::string> fingers{"index"};
   int frames = -1;
   double fps = 30.0;
@@ -32,7 +35,10 @@ struct RunArgs {
   std::string camera = "head";
   bool software = false, validation = false, realtime = false, no_hud = false;
   std::string hand = "right";
+  std::string hand_look = "joints";  // joints, skinned, or a glTF hand file (skinned with it)
   int sim_subject = 3;
+  std::string glove_calibration;
+  bool no_recentre = false;       // --hands vist|glove: the source's coordinates as they are  // --hands glove device: the wearer's min-max calibration
   std::uint64_t seed = 1;
   bool seed_given = false;   // --seed on the command line (studies: replaces the design's seed)
   // Study samples.
@@ -52,6 +58,10 @@ Result<engine::AppOptions> app_options_from(const RunArgs& a);
 // inputs.simulated_clock) that the hand source reads.
 Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene& scene,
                                           const engine::AppOptions& options);
+
+// --haptics hid: the fingertip devices on USB for the --fingers, bound by
+// --hid-device or as hid_channels.hpp describes; prints which is which.
+Result<std::vector<haptics::ServoChannel>> open_hid_haptics(const RunArgs& a);
 
 // Runs an App to completion, with Ctrl-C stopping it cleanly.
 Result<engine::AppReport> run_app_until_done(engine::App& app);

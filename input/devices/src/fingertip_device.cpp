@@ -11,12 +11,6 @@ namespace proprio::devices {
 
 namespace {
 
-const char* finger_name(Finger f) noexcept {
-  static constexpr const char* kNames[] = {"thumb", "index", "middle", "ring", "little"};
-  const auto i = static_cast<std::size_t>(f);
-  return i < 5 ? kNames[i] : "?";
-}
-
 std::string ms(DurationNs ns) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.4g ms", static_cast<double>(ns) / kNsPerMillisecond);
@@ -65,7 +59,7 @@ std::string fingertip_name(const std::optional<Handedness>& hand, const std::opt
   if (!hand && !finger) return "any fingertip";
   std::string s = hand ? std::string(to_string(*hand)) : std::string("either hand's");
   s += " ";
-  s += finger ? finger_name(*finger) : "any finger";
+  s += finger ? to_string(*finger) : std::string_view("any finger");
   return s;
 }
 }  // namespace

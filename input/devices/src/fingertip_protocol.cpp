@@ -144,8 +144,7 @@ std::string describe(const FingertipDeviceInfo& info) {
   std::string where = "unassigned";
   if (info.hand || info.finger) {
     where = std::string(info.hand ? to_string(*info.hand) : std::string_view("either hand")) + " ";
-    static constexpr const char* kFingers[] = {"thumb", "index", "middle", "ring", "little"};
-    where += info.finger ? kFingers[static_cast<std::size_t>(*info.finger)] : "any finger";
+    where += info.finger ? to_string(*info.finger) : std::string_view("any finger");
   }
   std::snprintf(buf, sizeof buf,
                 "%s, firmware %u.%u.%u, %u motor%s + %u force sensor%s, %u counts/rev x %.3g:1, control %u Hz, "

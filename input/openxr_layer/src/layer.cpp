@@ -23,15 +23,11 @@
 #include <vector>
 
 #include "proprio/core/log.hpp"
-#include "proprio/core/replay_source.hpp"
 #include "proprio/core/xr_interop.hpp"
+#include "proprio/openxr_layer/hand_sources.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 #include "proprio/openxr_layer/loader_interfaces.hpp"
 #include "proprio/openxr_layer/xr_ext.hpp"
-#include "proprio/sim/sim_hand_source.hpp"
-#include "proprio/glove/glove_board_source.hpp"
-#include "proprio/glove_eval/glove_evaluation.hpp"
-#include "proprio/vist/vist_hand_source.hpp"
 
 namespace proprio::openxr_layer {
 namespace {
@@ -154,58 +150,6 @@ XrReferenceSpaceType to_xr(ReferenceSpace s) {
   return XR_REFERENCE_SPACE_TYPE_LOCAL;
 }
 
-// A VIST tracker fed by a recorded session replayed in real time.
-Result<std::unique_ptr<HandSource>> make_vist_source(const SourceConfig& sc, const LayerConfig& config) {
-  auto session = vist::VistSessionReader::open(sc.path);
-  if (!session) return session.error();
-  vist::VistHandSourceOptions o;
-  o.tracker.hand = session->info().hand;
-  o.tracker.nominal_hand_length_m = session->info().nominal_hand_length_m;
-  o.tracker.nominal_hand_width_m = session->info().nominal_hand_width_m;
-  o.history.max_prediction_ns = config.max_prediction_ns;
-  auto source = vist::VistHandSource::create(session->info().glove, o);
-  if (!source) return source.error();
-  vist::VistSessionPlayerOptions po;
-  po.loop = sc.loop;
-  if (auto st = (*source)->play_session(sc.path, po); !st) return st.error();
-  return std::unique_ptr<HandSource>(std::move(*source));
-}
-
-// The stretch glove: a read-out board on USB, or a simulated wearer streamed in real time.
-Result<std::unique_ptr<HandSource>> make_glove_source(const SourceConfig& sc, const LayerConfig& config) {
-  const std::string model_path = sc.model.empty() ? std::string(PROPRIO_DEFAULT_GLOVE_MODEL) : sc.model;
-  if (sc.input == "device") {
-    auto layout = sc.layout.empty() ? Result<StretchGloveLayout>(StretchGloveLayout::thesis_default())
-                                    : StretchGloveLayout::load(sc.layout);
-    if (!layout) return layout.error();
-    auto calibration = glove::MinMaxCalibration::load(sc.calibration);
-    if (!calibration) return calibration.error();
-    auto model = glove::OnnxPoseModel::load(model_path, *layout);
-    if (!model) return model.error();
-    glove::GloveHandSourceOptions o;
-    o.tracker.hand = sc.hands.front();
-    o.tracker.hand_length_m = sc.hand_length_m;
-    o.tracker.hand_width_m = sc.hand_width_m;
-    o.history.max_prediction_ns = config.max_prediction_ns;
-    auto board = glove::GloveBoardSource::start(
-        std::make_unique<devices::HidapiTransport>(devices::stretch_board_selector()), *layout,
-        std::move(*calibration), std::move(*model), o);
-    if (!board) return board.error();
-    return std::unique_ptr<HandSource>(std::move(*board));
-  }
-  glove_eval::SimGloveSourceOptions o;
-  o.subject = sc.subject;
-  o.seed = sc.seed;
-  o.model = model_path;
-  if (!sc.layout.empty()) {
-    auto layout = StretchGloveLayout::load(sc.layout);
-    if (!layout) return layout.error();
-    o.layout = std::move(*layout);
-  }
-  o.history.max_prediction_ns = config.max_prediction_ns;
-  return glove_eval::make_sim_glove_source(o);
-}
-
 // Loads the layer config and starts its sources. Failures are logged and
 // leave the instance without sources: the app then sees no hand tracking.
 void start_sources(Instance& inst) {
@@ -219,49 +163,12 @@ void start_sources(Instance& inst) {
   }
   inst.config = std::move(*cfg);
   for (const SourceConfig& sc : inst.config.sources) {
-    std::unique_ptr<HandSource> source;
-    if (sc.type == SourceType::sim) {
-      sim::SimHandSourceOptions o;
-      o.subject = sc.subject;
-      o.protocol = sc.protocol;
-      o.seed = sc.seed;
-      o.rate_hz = sc.rate_hz;
-      o.hands = sc.hands;
-      o.relative_to_head = sc.space == ReferenceSpace::view;
-      o.history.max_prediction_ns = inst.config.max_prediction_ns;
-      auto s = sim::SimHandSource::create(o);
-      if (!s) {
-        logger().error("Proprio layer: {}: sim source: {}", inst.config.origin, s.error().message);
-        continue;
-      }
-      source = std::move(*s);
-    } else if (sc.type == SourceType::glove) {
-      auto s = make_glove_source(sc, inst.config);
-      if (!s) {
-        logger().error("Proprio layer: {}: glove source: {}", inst.config.origin, s.error().message);
-        continue;
-      }
-      source = std::move(*s);
-    } else if (sc.type == SourceType::vist) {
-      auto s = make_vist_source(sc, inst.config);
-      if (!s) {
-        logger().error("Proprio layer: {}: vist source: {}", inst.config.origin, s.error().message);
-        continue;
-      }
-      source = std::move(*s);
-    } else {
-      ReplayOptions o;
-      o.loop = sc.loop;
-      o.max_prediction_ns = inst.config.max_prediction_ns;
-      auto s = ReplayHandSource::open(sc.path, o);
-      if (!s) {
-        logger().error("Proprio layer: {}: replay source: {}", inst.config.origin, s.error().message);
-        continue;
-      }
-      // Play from now: the recording's first pose maps to this instant.
-      s->set_time_offset_ns(MonotonicClock::instance().now_ns() - s->file_time_range().first_ns);
-      source = std::make_unique<ReplayHandSource>(std::move(*s));
+    auto started = start_hand_source(sc, inst.config.max_prediction_ns);
+    if (!started) {
+      logger().error("Proprio layer: {}: {}", inst.config.origin, started.error().message);
+      continue;
     }
+    std::unique_ptr<HandSource> source = std::move(*started);
     const SourceConfig* config = &sc;
     for (Handedness h : sc.hands) {
       auto& binding = inst.hands[static_cast<std::size_t>(h)];

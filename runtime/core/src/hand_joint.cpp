@@ -59,4 +59,20 @@ std::optional<Handedness> parse_handedness(std::string_view s) noexcept {
   return std::nullopt;
 }
 
+namespace {
+constexpr std::string_view kFingerNames[kFingerCount] = {"thumb", "index", "middle", "ring", "little"};
+}
+
+std::string_view to_string(Finger f) noexcept {
+  const auto i = static_cast<std::size_t>(f);
+  return i < kFingerCount ? kFingerNames[i] : std::string_view("?");
+}
+
+std::optional<Finger> parse_finger(std::string_view s) noexcept {
+  for (std::size_t i = 0; i < kFingerCount; ++i) {
+    if (s == kFingerNames[i]) return static_cast<Finger>(i);
+  }
+  return std::nullopt;
+}
+
 }  // namespace proprio

@@ -78,6 +78,7 @@ Status AppOptions::validate() const {
 std::string AppReport::describe() const {
   std::string s = fmt::format("{} frames ({}) on {}; render {:.1f} ms mean, {:.1f} ms p95, {:.1f} ms max", frames,
                               to_string(output), device, render_ms_mean, render_ms_p95, render_ms_max);
+  s += fmt::format("; tracked hand in {} of them", frames_with_hand);
   if (haptics) {
     s += fmt::format("; haptics: peak fingertip force {:.2f} N, {}", peak_fingertip_force_n, servo.describe());
   }
@@ -117,6 +118,7 @@ Status App::Impl::build_servo() {
 void App::Impl::read_hands(TimeNs t) {
   if (!inputs.hands) return;
   const PoseLookup r = inputs.hands->lookup(options.hand, t, tracked);
+  if (is_usable(r)) ++frames_with_hand;
   if (is_usable(r) && servo && servo->running()) servo->submit_tracked_hand(tracked);
   if (!is_usable(r) && r != PoseLookup::stale) tracked.active = false;
 }
@@ -228,6 +230,7 @@ AppReport App::Impl::report(OutputMode mode, const std::string& device, int fram
   r.output = mode;
   r.device = device;
   r.frames = frames;
+  r.frames_with_hand = frames_with_hand;
   double sum = 0;
   for (double v : render_ms) sum += v;
   r.render_ms_mean = render_ms.empty() ? 0 : sum / static_cast<double>(render_ms.size());

@@ -23,6 +23,7 @@ struct App::Impl {
   // snapshot's object_poses), or -1.
   std::vector<int> entity_free_object;
   HandPose tracked;
+  int frames_with_hand = 0;  // frames whose hand source gave a usable pose
   HandPose proxy;
   std::string hud_status;
   double peak_force_n = 0;

@@ -26,4 +26,37 @@ PoseLookup ScriptedTouchSource::lookup(Handedness hand, TimeNs t_ns, HandPose& o
   return PoseLookup::exact;
 }
 
+RecentredHandSource::RecentredHandSource(std::shared_ptr<HandSource> source, Vec3 p_wrist_target_in_world)
+    : source_(std::move(source)), p_target_(std::move(p_wrist_target_in_world)) {}
+
+void RecentredHandSource::shift(HandPose& pose) noexcept {
+  if (!pose.active) return;
+  std::lock_guard lock(mutex_);
+  if (!anchored_) {
+    offset_ = p_target_ - pose.joint(HandJoint::wrist).p;
+    anchored_ = true;
+  }
+  for (Pose& T : pose.T_world_joint) T.p += offset_;
+}
+
+Result<HandPose> RecentredHandSource::pose_at(Handedness hand, TimeNs t_ns) {
+  auto pose = source_->pose_at(hand, t_ns);
+  if (pose) shift(*pose);
+  return pose;
+}
+
+PoseLookup RecentredHandSource::lookup(Handedness hand, TimeNs t_ns, HandPose& out) noexcept {
+  const PoseLookup r = source_->lookup(hand, t_ns, out);
+  if (is_usable(r) || r == PoseLookup::stale) shift(out);
+  return r;
+}
+
+Vec3 RecentredHandSource::offset() const noexcept {
+  std::lock_guard lock(mutex_);
+  return offset_;
+}
+
+Vec3 recentred_wrist_target(const Scene& scene) { return scene.p_focus_in_world + Vec3(0.0, 0.08, 0.14); }
+
 }  // namespace proprio::engine
+

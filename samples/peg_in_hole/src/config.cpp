@@ -43,10 +43,7 @@ Status read_vec3(const Config& c, const char* key, Vec3& value) {
 }
 
 Result<Finger> finger_from(const std::string& name) {
-  static const char* names[] = {"thumb", "index", "middle", "ring", "little"};
-  for (std::size_t i = 0; i < kFingerCount; ++i) {
-    if (name == names[i]) return static_cast<Finger>(i);
-  }
+  if (auto f = parse_finger(name)) return *f;
   return make_error(Errc::parse_error, "unknown finger '" + name + "': use thumb, index, middle, ring or little");
 }
 

@@ -77,5 +77,8 @@ std::optional<HandJoint> parent_of(HandJoint j) noexcept;
 std::string_view to_string(HandJoint j) noexcept;
 std::string_view to_string(Handedness h) noexcept;
 std::optional<Handedness> parse_handedness(std::string_view s) noexcept;
+// "thumb", "index", "middle", "ring", "little".
+std::string_view to_string(Finger f) noexcept;
+std::optional<Finger> parse_finger(std::string_view s) noexcept;
 
 }  // namespace proprio

@@ -55,6 +55,7 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine AND TARGET proprio_mock_openxr
     DEPS proprio::engine)
   target_compile_definitions(engine_xr_tests PRIVATE
     PROPRIO_MOCK_RUNTIME_JSON="${PROPRIO_MOCK_RUNTIME_JSON}"
-    PROPRIO_XR_CAPTURE_DIR="${CMAKE_CURRENT_BINARY_DIR}/golden_out/xr_captures")
-  add_dependencies(engine_xr_tests proprio_mock_openxr_runtime)
+    PROPRIO_XR_CAPTURE_DIR="${CMAKE_CURRENT_BINARY_DIR}/golden_out/xr_captures"
+    PROPRIO_LAYER_MANIFEST_DIR="${_layer_manifest_dir}")
+  add_dependencies(engine_xr_tests proprio_mock_openxr_runtime XrApiLayer_proprio_hand_tracking)
 endif()

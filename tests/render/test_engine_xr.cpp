@@ -7,6 +7,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 
 #include "proprio/engine/app.hpp"
 #include "proprio/engine/scripted_hands.hpp"
@@ -21,6 +22,20 @@ std::string fmt_name(int frame, int view) {
   return buf;
 }
 
+// An XR run on lavapipe with validation, ending after `frames` frames.
+AppOptions xr_options(int frames) {
+  AppOptions o;
+  o.output = OutputMode::xr;
+  o.frames = frames;
+  o.software_renderer = true;
+  o.validation = true;
+  return o;
+}
+
+std::shared_ptr<const HandModel> adult_hand() {
+  return std::make_shared<const HandModel>(*HandShape::from_measurements(0.19, 0.09));
+}
+
 TEST(EngineXr, RendersBothEyesIntoTheRuntimesSwapchains) {
   const std::filesystem::path captures = std::filesystem::path(PROPRIO_XR_CAPTURE_DIR);
   std::filesystem::remove_all(captures);
@@ -33,13 +48,9 @@ TEST(EngineXr, RendersBothEyesIntoTheRuntimesSwapchains) {
 
   auto scene = Scene::preset("half-cylinder");
   ASSERT_TRUE(scene);
-  AppOptions o;
-  o.output = OutputMode::xr;
-  o.frames = 4;
-  o.software_renderer = true;
-  o.validation = true;
+  const AppOptions o = xr_options(4);
   AppInputs in;
-  in.hand_model = std::make_shared<const HandModel>(*HandShape::from_measurements(0.19, 0.09));
+  in.hand_model = adult_hand();
   in.hands = std::make_shared<ScriptedTouchSource>(in.hand_model, Handedness::right, *scene,
                                                    MonotonicClock::instance().now_ns());
   auto app = App::create(std::move(*scene), std::move(in), o);
@@ -76,5 +87,38 @@ TEST(EngineXr, RendersBothEyesIntoTheRuntimesSwapchains) {
   }
 }
 
+// Hands from the runtime: Proprio's own OpenXR layer, serving its simulated
+// hand, sits between the engine and the runtime. The engine's
+// XR_KHR_vulkan_enable2 session must pass through the layer untouched, and the
+// engine must see the layer's XR_EXT_hand_tracking hands.
+TEST(EngineXr, HandsComeFromProprioLayerThroughTheLoader) {
+  const std::filesystem::path dir = std::filesystem::path(PROPRIO_XR_CAPTURE_DIR).parent_path() / "xr_layer_hands";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto config = dir / "layer.toml";
+  std::ofstream(config) << "[[source]]\ntype = \"sim\"\nhands = [\"right\"]\n";
+  setenv("XR_RUNTIME_JSON", PROPRIO_MOCK_RUNTIME_JSON, 1);
+  setenv("XR_API_LAYER_PATH", PROPRIO_LAYER_MANIFEST_DIR, 1);
+  setenv("XR_ENABLE_API_LAYERS", "XR_APILAYER_PROPRIO_hand_tracking", 1);
+  setenv("PROPRIO_LAYER_CONFIG", config.c_str(), 1);
+  setenv("PROPRIO_MOCK_RUNTIME_VIEW_SIZE", "160x90", 1);
+  unsetenv("PROPRIO_MOCK_RUNTIME_CAPTURE_DIR");
+
+  auto scene = Scene::preset("half-cylinder");
+  ASSERT_TRUE(scene);
+  const AppOptions o = xr_options(20);
+  AppInputs in;  // no in-process hand source: the engine asks the runtime
+  in.hand_model = adult_hand();
+  auto app = App::create(std::move(*scene), std::move(in), o);
+  ASSERT_TRUE(app) << app.error().message;
+  auto report = (*app)->run();
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(report->output, OutputMode::xr);
+  EXPECT_GE(report->frames, 20);
+  // The layer's simulated source starts with the session; allow it a few frames.
+  EXPECT_GE(report->frames_with_hand, report->frames - 5) << report->describe();
+}
+
 }  // namespace
 }  // namespace proprio::engine
+

@@ -390,6 +390,7 @@ Result<AppReport> App::Impl::run_xr() {
       tracked.active = false;
       if (XR_SUCCEEDED(locate_hand(xr.hand_trackers[h], &li, &locations)) && locations.isActive) {
         tracked.active = true;
+        ++frames_with_hand;
         tracked.hand = options.hand;
         tracked.time_ns = t;
         for (std::size_t j = 0; j < kHandJointCount; ++j) {

@@ -130,7 +130,7 @@ struct AppReport {
   OutputMode output = OutputMode::headless;
   std::string device;  // the Vulkan device
   int frames = 0;
-  int frames_with_hand = 0;  // frames whose hand source gave a usable pose (in-process sources)
+  int frames_with_hand = 0;  // frames with a usable tracked hand (the hand source's, or the runtime's)
   std::vector<std::filesystem::path> images;
   double render_ms_mean = 0, render_ms_p95 = 0, render_ms_max = 0;  // CPU wall time of render + read-back
   double peak_fingertip_force_n = 0;  // after the safety gate, any channel

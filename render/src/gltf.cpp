@@ -9,6 +9,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
+#include "mesh_normals.hpp"
 #include "proprio/render/mesh.hpp"
 
 namespace proprio::render {
@@ -130,20 +131,9 @@ Status append_mesh(const tinygltf::Model& model, const tinygltf::Mesh& mesh, con
     } else {
       for (std::uint32_t i = 0; i < pos->count; ++i) out.indices.push_back(base + i);
     }
-    if (!nrm) {  // flat-ish normals: accumulate face normals per vertex
-      for (std::size_t t = first_index; t + 2 < out.indices.size(); t += 3) {
-        auto& a = out.vertices[out.indices[t]];
-        auto& b = out.vertices[out.indices[t + 1]];
-        auto& c = out.vertices[out.indices[t + 2]];
-        const glm::vec3 fn = glm::cross(b.position - a.position, c.position - a.position);
-        a.normal += fn;
-        b.normal += fn;
-        c.normal += fn;
-      }
-      for (std::size_t i = base; i < out.vertices.size(); ++i) {
-        auto& n = out.vertices[i].normal;
-        n = glm::length(n) > 0 ? glm::normalize(n) : glm::vec3(0, 1, 0);
-      }
+    if (!nrm) {  // smooth normals from the faces
+      detail::accumulate_face_normals(out.vertices, out.indices, first_index);
+      detail::normalise_normals(out.vertices, base);
     }
   }
   return {};

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <string>
 
+#include "mesh_normals.hpp"
 #include "proprio/core/glm_interop.hpp"
 #include "proprio/core/hand_joint.hpp"
 
@@ -103,19 +104,8 @@ class HandMeshBuilder {
         std::swap(mesh_.indices[t + 1], mesh_.indices[t + 2]);
       }
     }
-    for (std::size_t t = first_index_; t + 2 < mesh_.indices.size(); t += 3) {
-      auto& a = mesh_.vertices[mesh_.indices[t]];
-      auto& b = mesh_.vertices[mesh_.indices[t + 1]];
-      auto& c = mesh_.vertices[mesh_.indices[t + 2]];
-      const glm::vec3 n = glm::cross(b.position - a.position, c.position - a.position);
-      a.normal += n;
-      b.normal += n;
-      c.normal += n;
-    }
-    for (std::size_t i = first_vertex_; i < mesh_.vertices.size(); ++i) {
-      auto& n = mesh_.vertices[i].normal;
-      n = glm::length(n) > 0 ? glm::normalize(n) : glm::vec3(0, 1, 0);
-    }
+    detail::accumulate_face_normals(mesh_.vertices, mesh_.indices, first_index_);
+    detail::normalise_normals(mesh_.vertices, first_vertex_);
   }
 
  private:

@@ -9,6 +9,7 @@
 
 #include <glm/gtc/type_ptr.hpp>
 
+#include "mesh_normals.hpp"
 #include "proprio/render/skinned_mesh.hpp"
 
 namespace proprio::render {
@@ -203,21 +204,8 @@ Status append_skinned_primitive(const tinygltf::Model& model, const tinygltf::Pr
   if ((out.indices.size() - first_index) % 3 != 0) {
     return make_error(Errc::parse_error, fmt::format("{}: the index count is not a multiple of 3", what));
   }
-  if (!nrm) {  // smooth normals from the faces
-    for (std::size_t t = first_index; t + 2 < out.indices.size(); t += 3) {
-      auto& a = out.vertices[out.indices[t]];
-      auto& b = out.vertices[out.indices[t + 1]];
-      auto& c = out.vertices[out.indices[t + 2]];
-      const glm::vec3 fn = glm::cross(b.position - a.position, c.position - a.position);
-      a.normal += fn;
-      b.normal += fn;
-      c.normal += fn;
-    }
-  }
-  for (std::size_t i = base; i < out.vertices.size(); ++i) {
-    auto& n = out.vertices[i].normal;
-    n = glm::length(n) > 0 ? glm::normalize(n) : glm::vec3(0, 1, 0);
-  }
+  if (!nrm) detail::accumulate_face_normals(out.vertices, out.indices, first_index);  // smooth normals from the faces
+  detail::normalise_normals(out.vertices, base);
   return {};
 }
 

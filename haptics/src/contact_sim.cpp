@@ -562,7 +562,7 @@ struct ContactSimulation::Impl {
     std::array<Vec3, kFingerCount> f_world;
     f_world.fill(Vec3::Zero());
     std::array<int, kFingerCount> count{};
-    std::array<double, kFingerCount> depth{};
+    std::array<double, kFingerCount> depth{}, pressing{};
     for (int i = 0; i < data->ncon; ++i) {
       const mjContact& c = data->contact[i];
       const int f1 = geom_finger[static_cast<std::size_t>(c.geom1)];
@@ -579,6 +579,7 @@ struct ContactSimulation::Impl {
         f_world[fi] += force;
         ++count[fi];
         depth[fi] = std::max(depth[fi], -c.dist);
+        pressing[fi] += local[0];
       };
       if (f2 >= 0) add(f2, f);
       if (f1 >= 0) add(f1, -f);
@@ -593,6 +594,7 @@ struct ContactSimulation::Impl {
       tip.force.normal_n += alpha * (tip.raw.normal_n - tip.force.normal_n);
       tip.force.shear_x_n += alpha * (tip.raw.shear_x_n - tip.force.shear_x_n);
       tip.force.shear_z_n += alpha * (tip.raw.shear_z_n - tip.force.shear_z_n);
+      tip.contact_normal_n += alpha * (pressing[fi] - tip.contact_normal_n);
       tip.contact_count = count[fi];
       tip.max_penetration_m = depth[fi];
     }

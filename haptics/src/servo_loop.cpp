@@ -150,7 +150,10 @@ void ServoLoop::tick(TimeNs now) noexcept {
   ServoSnapshot& snap = scratch_;
   snap.object_count = std::min(simulation_.free_object_count(), ServoSnapshot::kMaxObjects);
   for (std::size_t i = 0; i < snap.object_count; ++i) snap.object_poses[i] = simulation_.free_object_pose(i);
-  for (std::size_t f = 0; f < kFingerCount; ++f) snap.contact[f] = simulation_.fingertips()[f].force;
+  for (std::size_t f = 0; f < kFingerCount; ++f) {
+    snap.contact[f] = simulation_.fingertips()[f].force;
+    snap.contact_normal_n[f] = simulation_.fingertips()[f].contact_normal_n;
+  }
   for (std::size_t i = 0; i < channels_.size(); ++i) {
     const ServoChannel& c = channels_[i];
     SafetyGate& gate = gates_[i];

@@ -1,4 +1,9 @@
-// Runs simulated trials and prints a trace (development aid).
+// Runs one simulated trial and prints a trace (development aid):
+//   peg_probe SETTING TRIAL SECONDS
+// Env: EVERY=N print every N ticks (250); HF=1 the hand's force on the peg;
+// FW=1 each fingertip's force (world and pad frame); PADS=1 each pad's normal
+// against the direction to the peg's axis; TIPS=1 tip positions; ABD=rad the
+// planned finger spread. "RELEASE why" lines say why the user let go.
 #include <cstdio>
 #include <cstdlib>
 #include "proprio/peg_in_hole/study_runner.hpp"
@@ -38,7 +43,8 @@ int main(int argc, char** argv) {
     world.submit_hand(cmd.T_world_wrist, cmd.angles);
     auto ev = world.step();
     std::string ph(user.phase_name());
-    if (ph != last || t % 250 == 0 || ev.kind != PegEvent::Kind::none) {
+    if (ph == "release" && last != "release") std::printf("RELEASE %s at %.2f\n", std::string(user.release_reason()).c_str(), 1e-9 * world.now_ns());
+    if (ph != last || t % (getenv("EVERY") ? atoi(getenv("EVERY")) : 250) == 0 || ev.kind != PegEvent::Kind::none) {
       const auto& pp = world.peg_pose();
       Vec3 ax = peg_axis(pp);
       auto ins = world.insertion();
@@ -51,6 +57,13 @@ int main(int argc, char** argv) {
       if (getenv("HF")) { Vec3 hf = world.servo().simulation().hand_force_on_object("peg"); std::printf("      hand->peg (%.2f %.2f %.2f) tip raw T%.2f I%.2f M%.2f cnt %d %d %d\n", hf.x(), hf.y(), hf.z(),
         world.servo().simulation().fingertip(Finger::thumb).raw.normal_n, world.servo().simulation().fingertip(Finger::index).raw.normal_n, world.servo().simulation().fingertip(Finger::middle).raw.normal_n,
         world.servo().simulation().fingertip(Finger::thumb).contact_count, world.servo().simulation().fingertip(Finger::index).contact_count, world.servo().simulation().fingertip(Finger::middle).contact_count); }
+      if (getenv("FW")) for (int f = 0; f < 3; ++f) { const auto& tip = world.servo().simulation().fingertip(static_cast<Finger>(f));
+        std::printf("      f%d world(%.2f %.2f %.2f) raw n %.2f sx %.2f sz %.2f\n", f, tip.f_in_world.x(), tip.f_in_world.y(), tip.f_in_world.z(), tip.raw.normal_n, tip.raw.shear_x_n, tip.raw.shear_z_n); }
+      if (getenv("PADS")) for (int f = 0; f < 3; ++f) {
+        const Pose& tip = s.proxy.joint(tip_of(static_cast<Finger>(f)));
+        Vec3 n = tip.q * Vec3(0, -1, 0); Vec3 d = pp.p - tip.p; d -= d.dot(ax) * ax; d.normalize();
+        std::printf("      pad%d normal(%.2f %.2f %.2f) toward-axis dot %.2f\n", f, n.x(), n.y(), n.z(), n.dot(d));
+      }
       if (getenv("TIPS")) for (int f = 0; f < 3; ++f) {
         Vec3 d = p.p_proxy_tip_in_world[f] - pp.p; Vec3 dr = d - d.dot(ax) * ax;
         std::printf("      tip%d rel(%.3f %.3f %.3f) radial %.4f\n", f, d.x(), d.y(), d.z(), dr.norm());

@@ -61,13 +61,12 @@ TEST(PegBreak, BreaksOnceUntilResetAndIgnoresNaN) {
   EXPECT_EQ(m.filtered_n(), 0.0);
 }
 
-TEST(PegBreak, GraspForceIsTheLargestFingertipNormal) {
-  std::array<haptics::FingertipForce, kFingerCount> c{};
-  c[0].normal_n = 2.0;
-  c[1].normal_n = 3.5;
-  c[2].normal_n = std::nan("");
-  c[3].shear_x_n = 9.0;  // shear does not count
-  EXPECT_DOUBLE_EQ(grasp_force_n(c), 3.5);
+TEST(PegBreak, GraspForceIsTheLargestContactNormalForce) {
+  std::array<double, kFingerCount> n{};
+  n[0] = 2.0;
+  n[1] = 3.5;
+  n[2] = std::nan("");
+  EXPECT_DOUBLE_EQ(grasp_force_n(n), 3.5);
 }
 
 TEST(PegColour, WhiteToBlueOverTheScaleAndRedWhenBroken) {
@@ -248,7 +247,7 @@ TEST(PegConditions, WithoutHapticsTheDevicesGetZeroWhileContactsStay) {
       const HandCommand cmd = user.act(p);
       w->submit_hand(cmd.T_world_wrist, cmd.angles);
       w->step();
-      max_contact = std::max(max_contact, grasp_force_n(w->snapshot().contact));
+      max_contact = std::max(max_contact, grasp_force_n(w->snapshot().contact_normal_n));
       for (std::size_t ch = 0; ch < w->snapshot().channel_count; ++ch) {
         max_commanded = std::max(max_commanded, w->snapshot().channels[ch].commanded.in_tip_frame().norm());
         max_measured = std::max(max_measured, w->snapshot().channels[ch].measured.in_tip_frame().norm());

@@ -134,6 +134,7 @@ TEST(ContactSim, FingertipUnderAWeightFeelsItAlongThePadNormal) {
   const FingertipContact& tip = sim->fingertip(Finger::index);
   const double weight = mass * 9.81;
   EXPECT_NEAR(tip.force.normal_n, weight, 0.03 * weight);
+  EXPECT_NEAR(tip.contact_normal_n, weight, 0.03 * weight) << "pad square to the load: the same force";
   EXPECT_LT(tip.force.shear_magnitude_n(), 0.05 * weight);
   EXPECT_GT(tip.contact_count, 0);
   EXPECT_LT(tip.max_penetration_m, 0.002);
@@ -173,6 +174,12 @@ TEST(ContactSim, SlidingGivesShearOpposingTheMotionWithinTheFrictionCone) {
     sim->set_target(pressed, pointing);
     sim->step();
   }
+  // The pitched-down pad meets the table at an angle: the contact's normal
+  // force is the table's (world +y); the pad frame's normal is less.
+  const FingertipContact& pressed_tip = sim->fingertip(Finger::index);
+  ASSERT_GT(pressed_tip.contact_count, 0);
+  EXPECT_NEAR(pressed_tip.contact_normal_n, pressed_tip.f_in_world.y(), 0.05 * pressed_tip.f_in_world.y());
+  EXPECT_LT(pressed_tip.force.normal_n, 0.98 * pressed_tip.contact_normal_n);
   int touching = 0, sliding_samples = 0;
   for (int i = 0; i < 600; ++i) {
     sim->set_target(Pose{pressed.q, pressed.p + Vec3(0.05 * i * 1e-3, 0, 0)}, pointing);

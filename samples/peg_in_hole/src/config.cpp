@@ -100,7 +100,8 @@ Status PegInHoleConfig::validate() const {
   }
   if (devices.fingers.empty() || devices.fingers.size() > kFingerCount) return bad("devices.fingers: 1 to 5 fingers");
   if (!positive(recording.rate_hz) || recording.rate_hz > 1000.0) return bad("recording.rate_hz must be in (0, 1000]");
-  if (!positive(sim_user.reach_speed_mps) || !positive(sim_user.insert_speed_mps) || !positive(sim_user.closing_speed)) {
+  if (!positive(sim_user.reach_speed_mps) || !positive(sim_user.insert_speed_mps) || !positive(sim_user.closing_speed) ||
+      !positive(sim_user.guarded_speed_mps)) {
     return bad("sim_user speeds must be positive");
   }
   if (!positive(sim_user.grip_target_n)) return bad("sim_user.grip_target_n must be positive");
@@ -266,6 +267,8 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
           {"visual_force_noise_n", &s.visual_force_noise_n, 0.0, 10.0},
           {"haptic_force_noise_n", &s.haptic_force_noise_n, 0.0, 10.0},
           {"visual_reaction_s", &s.visual_reaction_s, 0.0, 5.0},
+          {"haptic_reaction_s", &s.haptic_reaction_s, 0.0, 5.0},
+          {"guarded_speed_mps", &s.guarded_speed_mps, 0.001, 1.0},
           {"grip_target_n", &s.grip_target_n, 0.01, 50.0},
           {"felt_ceiling_n", &s.felt_ceiling_n, 0.05, 50.0},
           {"grip_load_ratio", &s.grip_load_ratio, 0.0, 10.0},

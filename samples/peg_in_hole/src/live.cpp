@@ -46,7 +46,7 @@ void LiveTrial::on_frame(engine::FrameContext& c) {
   elapsed_s_ = carried_s_ + 1e-9 * static_cast<double>(c.time_ns - start_ns_);
   double force = 0.0;
   if (c.servo != nullptr) {
-    force = grasp_force_n(c.servo->contact);
+    force = grasp_force_n(c.servo->contact_normal_n);
     if (std::isfinite(force)) {
       peak_ = std::max(peak_, force);
       if (force > 0.05) {
@@ -97,7 +97,25 @@ struct TrialOutcome {
   bool inserted = false;
   int breaks = 0;
   double peak = 0, mean = 0;
+  // The 1 kHz servo loop's timing over the trial's App runs (a break restarts
+  // the App): worst percentiles, summed counts.
+  haptics::ServoTiming servo;
+  double render_ms_mean = 0;
 };
+
+void merge_timing(haptics::ServoTiming& total, const haptics::ServoTiming& run) {
+  total.ticks += run.ticks;
+  total.overruns += run.overruns;
+  total.stale_hand_ticks += run.stale_hand_ticks;
+  total.rejected_hands += run.rejected_hands;
+  total.realtime = run.realtime;
+  total.jitter_p50_us = std::max(total.jitter_p50_us, run.jitter_p50_us);
+  total.jitter_p99_us = std::max(total.jitter_p99_us, run.jitter_p99_us);
+  total.jitter_max_us = std::max(total.jitter_max_us, run.jitter_max_us);
+  total.tick_p50_us = std::max(total.tick_p50_us, run.tick_p50_us);
+  total.tick_p99_us = std::max(total.tick_p99_us, run.tick_p99_us);
+  total.tick_max_us = std::max(total.tick_max_us, run.tick_max_us);
+}
 
 Result<TrialOutcome> run_one(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting,
                              const std::string& instruction, double limit_s, bool finish_on_insert, bool no_hole,
@@ -108,6 +126,7 @@ Result<TrialOutcome> run_one(const PegInHoleConfig& config, const TrialLayout& l
   for (auto& e : scene.entities) e.peg_visual = e.body.name == "peg";
   LiveTrial trial(config, scene, instruction, limit_s, finish_on_insert, layout.p_hole_in_world,
                   layout.p_peg_start_in_world);
+  TrialOutcome out;
   while (true) {
     engine::AppInputs extra;
     extra.servo_options.remove_finger_abduction = !setting.abduction;
@@ -115,13 +134,20 @@ Result<TrialOutcome> run_one(const PegInHoleConfig& config, const TrialLayout& l
     extra.on_frame = [&trial](engine::FrameContext& c) { trial.on_frame(c); };
     auto report = run(scene, std::move(extra));
     if (!report) return report.error();
+    merge_timing(out.servo, report->servo);
+    out.render_ms_mean = std::max(out.render_ms_mean, report->render_ms_mean);
     if (trial.needs_respawn()) {
       trial.continue_after_respawn();  // the scene starts with the peg at its start again
       continue;
     }
     break;
   }
-  return TrialOutcome{trial.elapsed_s(), trial.inserted(), trial.breaks(), trial.peak_force_n(), trial.mean_force_n()};
+  out.time_s = trial.elapsed_s();
+  out.inserted = trial.inserted();
+  out.breaks = trial.breaks();
+  out.peak = trial.peak_force_n();
+  out.mean = trial.mean_force_n();
+  return out;
 }
 
 }  // namespace
@@ -183,7 +209,8 @@ Result<int> run_live_session(const PegInHoleConfig& config, const LiveStudyOptio
         {r->inserted, r->time_s, r->breaks, 0, r->peak, r->mean, "", "real"});
     if (Status st = session->record(*trial, resp); !st) return st.error();
     ++recorded;
-    say(fmt::format("  {:.1f} s{}, {} breaks", r->time_s, r->inserted ? "" : " (timed out)", r->breaks));
+    say(fmt::format("  {:.1f} s{}, {} breaks; render {:.1f} ms per frame; servo {}", r->time_s,
+                    r->inserted ? "" : " (timed out)", r->breaks, r->render_ms_mean, r->servo.describe()));
   }
   return recorded;
 }

@@ -5,10 +5,10 @@
 
 namespace proprio::peg_in_hole {
 
-double grasp_force_n(const std::array<haptics::FingertipForce, kFingerCount>& contact) noexcept {
+double grasp_force_n(const std::array<double, kFingerCount>& contact_normal_n) noexcept {
   double f = 0.0;
-  for (const auto& c : contact) {
-    if (std::isfinite(c.normal_n)) f = std::max(f, c.normal_n);
+  for (double n : contact_normal_n) {
+    if (std::isfinite(n)) f = std::max(f, n);
   }
   return f;
 }

@@ -113,7 +113,7 @@ PegEvent PegWorld::step() {
   if (const haptics::ServoSnapshot* s = servo_->latest()) snapshot_ = *s;
   if (auto p = servo_->simulation().object_pose("peg")) peg_pose_ = *p;
 
-  const double force = grasp_force_n(snapshot_.contact);
+  const double force = grasp_force_n(snapshot_.contact_normal_n);
   if (std::isfinite(force)) {
     peak_force_n_ = std::max(peak_force_n_, force);
     if (force > 0.05) {
@@ -142,13 +142,15 @@ PegEvent PegWorld::step() {
     }
   }
   if (config_.peg.respawn_dropped && phase_ != WorldPhase::spring) {
-    // Fell off the table, or lies on it untouched for a second (a bottle on
-    // its side that the experimenter stands up again).
+    // Fell off the table, or rests untouched for a second not standing
+    // (more than 18 deg from upright: on its side, or leaning on the hole's
+    // plate), a bottle the experimenter stands up again. A free standing
+    // bottle of this shape falls past 15 deg, so nothing rests in between.
     const double table = config_.layout.table_height_m;
     const bool fell_off = peg_pose_.p.y() < table - 0.05;
-    const bool lying = std::abs(peg_axis(peg_pose_).y()) < 0.7 && peg_pose_.p.y() < table + config_.peg.radius_m + 0.01;
+    const bool not_standing = std::abs(peg_axis(peg_pose_).y()) < 0.95;
     const bool untouched = force < 0.05;
-    if (lying && untouched && !insertion_.inserted) {
+    if (not_standing && untouched && !insertion_.inserted) {
       if (idle_since_ns_ < 0) idle_since_ns_ = now_ns_;
     } else {
       idle_since_ns_ = -1;

@@ -107,6 +107,10 @@ struct FingertipContact {
   FingertipForce force;
   FingertipForce raw;  // unfiltered, this step
   Vec3 f_in_world = Vec3::Zero();  // unfiltered total force, world frame
+  // Filtered, how hard the surfaces press together: the sum of the contacts'
+  // normal forces along their contact normals. The fingertip frame's
+  // normal_n is less whenever the pad meets the surface at an angle.
+  double contact_normal_n = 0.0;
   int contact_count = 0;
   double max_penetration_m = 0.0;
 };

@@ -82,6 +82,7 @@ struct ServoSnapshot {
   std::uint64_t tick = 0;
   HandPose proxy;  // the rendered hand
   std::array<FingertipForce, kFingerCount> contact{};  // the simulation's (filtered) fingertip forces
+  std::array<double, kFingerCount> contact_normal_n{};  // FingertipContact::contact_normal_n
   struct Channel {
     Finger finger = Finger::index;
     FingertipForce commanded;  // after the safety gate

@@ -13,8 +13,12 @@
 
 namespace proprio::peg_in_hole {
 
-// The force that breaks the peg: the largest fingertip normal force ("|lambda_N|").
-double grasp_force_n(const std::array<haptics::FingertipForce, kFingerCount>& contact) noexcept;
+// The force that breaks the peg ("|lambda_N|"): the largest fingertip force
+// along the contact normals (haptics::FingertipContact::contact_normal_n).
+// Not the fingertip frame's normal: a pad meets the round peg at an angle (a
+// thumb often touches with its tip's end), and what falls on the pad frame's
+// shear axes would otherwise crush the bottle unnoticed.
+double grasp_force_n(const std::array<double, kFingerCount>& contact_normal_n) noexcept;
 
 // First-order low-pass of the grasp force and the break test on it. The
 // threshold is inclusive: a filtered force of exactly break_force_n breaks.

@@ -56,6 +56,8 @@ class SimulatedUser {
   std::string_view phase_name() const noexcept;
   double closure() const noexcept { return s_; }
   int regrasps() const noexcept { return regrasps_; }
+  // Why the hand last let go (broken, slipped, missed, tipped, closed on nothing).
+  std::string_view release_reason() const noexcept { return release_reason_; }
   // What the user has learnt (kept across trials): its grip target with
   // touch and its feed-forward closure without.
   double grip_target_n() const noexcept { return grip_target_n_; }
@@ -66,7 +68,7 @@ class SimulatedUser {
   HandAngles posture(double s) const;
 
  private:
-  enum class Phase { reach, approach, close, lift, rotate, align, insert, done, release, wait_respawn };
+  enum class Phase { reach, approach, touch, close, lift, rotate, align, insert, done, release, wait_respawn };
   void plan_grasp(const Pose& T_world_peg_seen);
   void start_move(const Pose& to, double duration_s);
   Pose seen_peg(const Percept& p);
@@ -74,9 +76,14 @@ class SimulatedUser {
   double seen_force(const Percept& p);
   bool contact_felt(const Percept& p) const;
   double wanted_grip_n(const Percept& p) const;
+  // A closure change, from one look at the colour.
+  double closure_correction(double seen_n, double wanted_n) const;
   // One tick of grip control; true while the grip is where the user wants it.
-  bool regulate_grip(const Percept& p, double dt);
+  // look_interval_scale < 1: the colour is watched more closely than every
+  // visual reaction time (while taking the weight).
+  bool regulate_grip(const Percept& p, double dt, double look_interval_scale = 1.0);
   void go(Phase next);
+  void release_because(const char* reason);
   double caution() const noexcept;
 
   PegInHoleConfig config_;
@@ -86,11 +93,22 @@ class SimulatedUser {
   Phase phase_ = Phase::reach;
   TimeNs now_ = 0, phase_start_ = 0, last_ = 0;
   bool grasp_only_ = false;
+  bool loading_ = false;
+  const char* release_reason_ = "";
 
   // Plan.
   double s_contact_ = 1.0, s_open_ = 0.2, s_ = 0.2;
-  Pose T_grasp_, T_pre_, T_rest_;
+  Pose T_grasp_, T_standoff_, T_pre_, T_rest_;
   Vec3 p_grasp_in_world_ = Vec3::Zero();
+  // The guarded move: along the pinch axis until the thumb touches; the hand
+  // stops a reaction time after the contact is felt or seen.
+  Vec3 pinch_axis_in_world_ = Vec3::UnitX();
+  TimeNs guard_stop_at_ = -1;
+  double guard_travel_m_ = 0.0;
+  // What the user judges alignment by: the peg's pose as seen, averaged over
+  // a fraction of a second (a peg swinging in the grasp is judged by where it
+  // hangs, not chased swing by swing).
+  Vec3 steady_peg_axis_ = Vec3::UnitY(), steady_peg_p_ = Vec3::Zero();
   // Current commanded trajectory (min-jerk between two wrist poses).
   Pose move_from_, move_to_, cmd_;
   double move_duration_s_ = 0.0;
@@ -103,6 +121,7 @@ class SimulatedUser {
   double grip_target_n_, feedforward_;
   bool touch_noticed_ = false, touch_missing_ = false, last_visual_ok_ = false;
   TimeNs next_visual_check_ = 0, stable_since_ = -1;
+  double last_seen_n_ = 0.0;  // the force last read off the peg's colour
   double ff_closure_this_grasp_ = 0.0;
   double contact_s_ = -1.0;
   int regrasps_ = 0, align_iterations_ = 0;

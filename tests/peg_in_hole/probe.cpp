@@ -3,7 +3,8 @@
 // Env: EVERY=N print every N ticks (250); HF=1 the hand's force on the peg;
 // FW=1 each fingertip's force (world and pad frame); PADS=1 each pad's normal
 // against the direction to the peg's axis; TIPS=1 tip positions; ABD=rad the
-// planned finger spread. "RELEASE why" lines say why the user let go.
+// planned finger spread; STIFF=N·m/rad the finger coupling; GRIP=N the grip
+// target. "RELEASE why" lines say why the user let go.
 #include <cstdio>
 #include <cstdlib>
 #include "proprio/peg_in_hole/study_runner.hpp"
@@ -14,6 +15,8 @@ int main(int argc, char** argv) {
   const int trial = argc > 2 ? std::atoi(argv[2]) : 0;
   const double limit = argc > 3 ? std::atof(argv[3]) : 30;
   PegInHoleConfig c;
+  if (getenv("STIFF")) c.devices.finger_joint_stiffness_nm_per_rad = atof(getenv("STIFF"));
+  if (getenv("GRIP")) c.sim_user.grip_target_n = atof(getenv("GRIP"));
   if (getenv("ABD")) { c.sim_user.index_abduction_rad = atof(getenv("ABD")); c.sim_user.middle_abduction_rad = -atof(getenv("ABD")); }
   auto dev = load_device_model(c);
   if (!dev) { std::printf("%s\n", dev.error().message.c_str()); return 1; }

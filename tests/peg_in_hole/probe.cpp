@@ -4,7 +4,9 @@
 // FW=1 each fingertip's force (world and pad frame); PADS=1 each pad's normal
 // against the direction to the peg's axis; TIPS=1 tip positions; ABD=rad the
 // planned finger spread; STIFF=N·m/rad the finger coupling; GRIP=N the grip
-// target. "RELEASE why" lines say why the user let go.
+// target; WRIST=1 the proxy wrist against the submitted one. "RELEASE why"
+// lines say why the user let go.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include "proprio/peg_in_hole/study_runner.hpp"
@@ -60,6 +62,9 @@ int main(int argc, char** argv) {
       if (getenv("HF")) { Vec3 hf = world.servo().simulation().hand_force_on_object("peg"); std::printf("      hand->peg (%.2f %.2f %.2f) tip raw T%.2f I%.2f M%.2f cnt %d %d %d\n", hf.x(), hf.y(), hf.z(),
         world.servo().simulation().fingertip(Finger::thumb).raw.normal_n, world.servo().simulation().fingertip(Finger::index).raw.normal_n, world.servo().simulation().fingertip(Finger::middle).raw.normal_n,
         world.servo().simulation().fingertip(Finger::thumb).contact_count, world.servo().simulation().fingertip(Finger::index).contact_count, world.servo().simulation().fingertip(Finger::middle).contact_count); }
+      if (getenv("WRIST")) { const Pose& pw = s.proxy.joint(HandJoint::wrist); const Vec3 dp = pw.p - cmd.T_world_wrist.p;
+        const double ang = 2.0 * std::acos(std::min(1.0, std::abs(pw.q.dot(cmd.T_world_wrist.q))));
+        std::printf("      proxy wrist off (%.4f %.4f %.4f) m, %.2f deg\n", dp.x(), dp.y(), dp.z(), ang * 57.2958); }
       if (getenv("FW")) for (int f = 0; f < 3; ++f) { const auto& tip = world.servo().simulation().fingertip(static_cast<Finger>(f));
         std::printf("      f%d world(%.2f %.2f %.2f) raw n %.2f sx %.2f sz %.2f\n", f, tip.f_in_world.x(), tip.f_in_world.y(), tip.f_in_world.z(), tip.raw.normal_n, tip.raw.shear_x_n, tip.raw.shear_z_n); }
       if (getenv("PADS")) for (int f = 0; f < 3; ++f) {

@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
         const double ang = 2.0 * std::acos(std::min(1.0, std::abs(pw.q.dot(cmd.T_world_wrist.q))));
         std::printf("      proxy wrist off (%.4f %.4f %.4f) m, %.2f deg\n", dp.x(), dp.y(), dp.z(), ang * 57.2958); }
       if (getenv("FW")) for (int f = 0; f < 3; ++f) { const auto& tip = world.servo().simulation().fingertip(static_cast<Finger>(f));
-        std::printf("      f%d world(%.2f %.2f %.2f) raw n %.2f sx %.2f sz %.2f\n", f, tip.f_in_world.x(), tip.f_in_world.y(), tip.f_in_world.z(), tip.raw.normal_n, tip.raw.shear_x_n, tip.raw.shear_z_n); }
+        std::printf("      f%d world(%.2f %.2f %.2f) raw n %.2f sx %.2f sz %.2f contact normal %.2f\n", f, tip.f_in_world.x(), tip.f_in_world.y(), tip.f_in_world.z(), tip.raw.normal_n, tip.raw.shear_x_n, tip.raw.shear_z_n, tip.contact_normal_n); }
       if (getenv("PADS")) for (int f = 0; f < 3; ++f) {
         const Pose& tip = s.proxy.joint(tip_of(static_cast<Finger>(f)));
         Vec3 n = tip.q * Vec3(0, -1, 0); Vec3 d = pp.p - tip.p; d -= d.dot(ax) * ax; d.normalize();

@@ -9,6 +9,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
+#include "gltf_write.hpp"
 #include "mesh_normals.hpp"
 #include "proprio/render/mesh.hpp"
 
@@ -251,15 +252,7 @@ Status save_gltf(const MeshData& mesh, const std::filesystem::path& file) {
   tinygltf::Scene scene;
   scene.nodes.push_back(0);
   model.scenes.push_back(scene);
-  model.defaultScene = 0;
-  model.asset.version = "2.0";
-  model.asset.generator = "proprio";
-
-  tinygltf::TinyGLTF writer;
-  if (!writer.WriteGltfSceneToFile(&model, file.string(), true, true, true, false)) {
-    return make_error(Errc::io_error, fmt::format("could not write glTF file '{}'", file.string()));
-  }
-  return {};
+  return detail::write_gltf_file(model, file);
 }
 
 }  // namespace proprio::render

@@ -9,6 +9,7 @@
 
 #include <glm/gtc/type_ptr.hpp>
 
+#include "gltf_write.hpp"
 #include "mesh_normals.hpp"
 #include "proprio/render/skinned_mesh.hpp"
 
@@ -454,15 +455,7 @@ Status save_skinned_gltf(const SkinnedMeshData& mesh, const std::filesystem::pat
   }
   model.skins.push_back(skin);
   model.scenes.push_back(scene);
-  model.defaultScene = 0;
-  model.asset.version = "2.0";
-  model.asset.generator = "proprio";
-
-  tinygltf::TinyGLTF writer;
-  if (!writer.WriteGltfSceneToFile(&model, file.string(), true, true, true, false)) {
-    return make_error(Errc::io_error, fmt::format("could not write glTF file '{}'", file.string()));
-  }
-  return {};
+  return detail::write_gltf_file(model, file);
 }
 
 }  // namespace proprio::render

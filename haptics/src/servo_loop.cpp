@@ -17,6 +17,13 @@ namespace proprio::haptics {
 namespace {
 constexpr DurationNs kBinNs = 10'000;  // histogram bin: 10 us
 
+FingertipForce scaled(FingertipForce f, double k) noexcept {
+  f.normal_n *= k;
+  f.shear_x_n *= k;
+  f.shear_z_n *= k;
+  return f;
+}
+
 bool finite_angles(const HandAngles& a) {
   for (double x : a) {
     if (!std::isfinite(x)) return false;
@@ -29,7 +36,7 @@ std::string ServoLoopOptions::describe() const {
   std::ostringstream s;
   s << "servo loop: period " << period_ns / 1000 << " us, " << (realtime_priority ? "SCHED_FIFO requested" : "normal priority")
     << ", stale hand after " << tracked_hand_timeout_ns / kNsPerMillisecond << " ms, finger AA "
-    << (remove_finger_abduction ? "removed" : "tracked") << ", haptics " << (haptics_enabled ? "on" : "off (zero output)");
+    << (remove_finger_abduction ? "removed" : "tracked") << ", haptics " << (haptics_enabled ? "on" : "off (zero output)") << ", force scale " << force_scale;
   return s.str();
 }
 
@@ -39,6 +46,9 @@ Status ServoLoopOptions::validate() const {
   }
   if (tracked_hand_timeout_ns <= 0) {
     return make_error(Errc::invalid_argument, "servo loop tracked_hand_timeout_ns must be > 0");
+  }
+  if (!(force_scale > 0.0 && force_scale <= 10.0)) {
+    return make_error(Errc::invalid_argument, "servo loop force_scale must be in (0, 10]");
   }
   if (realtime_priority_level < 1 || realtime_priority_level > 99) {
     return make_error(Errc::invalid_argument, "servo loop realtime_priority_level must be in [1, 99]");
@@ -158,7 +168,7 @@ void ServoLoop::tick(TimeNs now) noexcept {
     const ServoChannel& c = channels_[i];
     SafetyGate& gate = gates_[i];
     const FingertipForce desired =
-        options_.haptics_enabled ? simulation_.fingertip(c.finger).force : FingertipForce{};
+        options_.haptics_enabled ? scaled(simulation_.fingertip(c.finger).force, options_.force_scale) : FingertipForce{};
     gate.command(desired, now);
     const FingertipForce out = gate.output(now);
     const bool enabled = gate.engaged();

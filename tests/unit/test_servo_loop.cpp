@@ -91,6 +91,24 @@ TEST(ServoLoop, WithoutHapticsTheDeviceGetsZeroWhileTheSimulationRuns) {
   EXPECT_EQ(rig.index_sink->measured().normal_n, 0.0);
 }
 
+TEST(ServoLoop, ForceScaleScalesWhatTheDeviceGetsNotTheSimulation) {
+  ServoLoopOptions o;
+  o.force_scale = 0.5;
+  Rig half(o);
+  Rig full;
+  half.loop->engage(kNsPerSecond);
+  full.loop->engage(kNsPerSecond);
+  half.run(0.0, 2.0);
+  full.run(0.0, 2.0);
+  const double simulated = half.loop->latest()->contact[1].normal_n;
+  EXPECT_NEAR(simulated, full.loop->latest()->contact[1].normal_n, 1e-9) << "the simulation does not see the scale";
+  ASSERT_GT(simulated, 0.3);
+  ASSERT_LT(simulated, 2.0 * half.loop->gate(0).limits().max_normal_n) << "else the clamp hides the scale";
+  EXPECT_NEAR(half.index_sink->measured().normal_n, 0.5 * simulated, 0.03 * simulated + 0.01);
+  o.force_scale = 0.0;
+  EXPECT_FALSE(o.validate());
+}
+
 TEST(ServoLoop, WithoutAbductionTheFingersDoNotSpread) {
   ServoLoopOptions o;
   o.remove_finger_abduction = true;

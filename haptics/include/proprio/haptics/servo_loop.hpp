@@ -70,6 +70,11 @@ struct ServoLoopOptions {
   // simulation runs unchanged.
   bool remove_finger_abduction = false;
   bool haptics_enabled = true;
+  // Rendered force = force_scale x simulated contact force, before the
+  // safety gate's clamps. A fingertip device presses at most a couple of
+  // newtons, so a task whose forces matter up to 5 N is scaled into the
+  // device's range; at 1 everything above max_normal_n feels the same.
+  double force_scale = 1.0;
   // Engage the gates (ramp-in) when the loop starts.
   bool engage_on_start = true;
 

@@ -4,8 +4,9 @@
 // FW=1 each fingertip's force (world and pad frame); PADS=1 each pad's normal
 // against the direction to the peg's axis; TIPS=1 tip positions; ABD=rad the
 // planned finger spread; STIFF=N·m/rad the finger coupling; GRIP=N the grip
-// target; WRIST=1 the proxy wrist against the submitted one. "RELEASE why"
-// lines say why the user let go.
+// target; WRIST=1 the proxy wrist against the submitted one; THUMBROLL=deg
+// the thumb's pronation; FAM=s spring familiarisation first (20); SPRING=1
+// the trial itself on the spring; REPEAT=N N trials in a row by one user. "RELEASE why" lines say why the user let go.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -22,11 +23,38 @@ int main(int argc, char** argv) {
   if (getenv("ABD")) { c.sim_user.index_abduction_rad = atof(getenv("ABD")); c.sim_user.middle_abduction_rad = -atof(getenv("ABD")); }
   auto dev = load_device_model(c);
   if (!dev) { std::printf("%s\n", dev.error().message.c_str()); return 1; }
-  auto shape = HandShape::from_measurements(c.sim_user.hand_length_m, c.sim_user.hand_width_m);
+  if (getenv("THUMBROLL")) c.sim_user.thumb_pronation_deg = atof(getenv("THUMBROLL"));
+  auto shape = simulated_participant_hand(c.sim_user);
   HandModel hand(*shape);
   SimulatedUser user(c, hand, 7);
+  const double fam = getenv("FAM") ? atof(getenv("FAM")) : 20.0;
+  for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
+    if (fam <= 0) break;
+    user.set_grasp_only(phase == WorldPhase::spring);
+    SimulatedTrialOptions fo;
+    fo.phase = phase;
+    fo.time_limit_s = fam;
+    auto r = run_simulated_trial(c, trial_layout(c, 11, -1), Setting{true, true}, user, hand, *dev, fo);
+    user.set_grasp_only(false);
+    std::printf("familiarisation %.0f s: %d breaks, felt gain %.2f\n", fam, r ? r->breaks : -1, user.felt_gain());
+  }
+  if (const char* rep = getenv("REPEAT")) {  // REPEAT=N: N trials in a row, one participant
+    for (int k = 0; k < atoi(rep); ++k) {
+      SimulatedTrialOptions to;
+      to.time_limit_s = limit;
+      auto r = run_simulated_trial(c, trial_layout(c, 11, trial + k), setting_from_number(setting), user, hand, *dev, to);
+      if (!r) return 1;
+      std::printf("trial %d: %s %.1f s, %d breaks, %d regrasps; grip target %.2f, felt gain %.2f, feed-forward %.3f\n",
+                  trial + k, r->completed ? "inserted" : "timed out", r->completion_time_s, r->breaks, r->regrasps,
+                  user.grip_target_n(), user.felt_gain(), user.feedforward_closure());
+    }
+    return 0;
+  }
   auto layout = trial_layout(c, 11, trial);
-  auto w = PegWorld::create(c, layout, setting_from_number(setting), hand, *dev);
+  const bool spring = getenv("SPRING") != nullptr;
+  if (spring) layout = trial_layout(c, 11, -1);
+  user.set_grasp_only(spring);
+  auto w = PegWorld::create(c, layout, setting_from_number(setting), hand, *dev, spring ? WorldPhase::spring : WorldPhase::trial);
   if (!w) { std::printf("%s\n", w.error().message.c_str()); return 1; }
   PegWorld& world = **w;
   const Quat q(Eigen::AngleAxisd(-0.3, Vec3::UnitX()));

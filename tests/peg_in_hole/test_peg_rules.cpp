@@ -128,6 +128,11 @@ TEST(PegConfig, TomlOverridesAndClearErrors) {
   EXPECT_DOUBLE_EQ(stiff->devices.finger_joint_stiffness_nm_per_rad, 1.5);
   EXPECT_DOUBLE_EQ(stiff->sim_user.felt_ceiling_n, 0.9);
   EXPECT_FALSE(PegInHoleConfig::parse("[devices]\nfinger_joint_stiffness_nm_per_rad = 0\n"));
+  auto scaled = PegInHoleConfig::parse("[devices]\nforce_scale = 0.5\n[sim_user]\nthumb_pronation_deg = 0\n");
+  ASSERT_TRUE(scaled) << scaled.error().message;
+  EXPECT_DOUBLE_EQ(scaled->devices.force_scale, 0.5);
+  EXPECT_DOUBLE_EQ(scaled->sim_user.thumb_pronation_deg, 0.0);
+  EXPECT_FALSE(PegInHoleConfig::parse("[devices]\nforce_scale = 0\n"));
   auto unknown = PegInHoleConfig::parse("[peg]\nradius = 0.02\n", "t.toml");
   ASSERT_FALSE(unknown);
   EXPECT_NE(unknown.error().message.find("radius_m"), std::string::npos) << unknown.error().message;
@@ -274,4 +279,38 @@ TEST(PegWorldSpring, TheFamiliarisationPegHangsBelowItsAnchor) {
   const Vec3 rest = c.familiarisation.spring_anchor_m - Vec3(0, 0.5 * c.peg.length_m, 0);
   EXPECT_NEAR((*w)->peg_pose().p.y(), rest.y() - 0.5 * 9.81 / 200.0, 0.003);
   EXPECT_NEAR((*w)->peg_pose().p.x(), rest.x(), 0.002);
+}
+
+namespace {
+// The angle (deg) between the thumb pad's normal and the direction to the
+// finger pads, at the closure where the pinch would span the peg.
+double thumb_pad_angle_deg(const PegInHoleConfig& c) {
+  auto shape = simulated_participant_hand(c.sim_user);
+  EXPECT_TRUE(shape);
+  const HandModel hand(*shape);
+  const SimulatedUser user(c, hand, 1);
+  const double span = 2.0 * c.peg.radius_m + shape->fingers[0].joint_radius_m[3] + shape->fingers[1].joint_radius_m[4];
+  double best_gap = 1e9, angle = 180.0;
+  for (double s = 0.0; s <= 2.0; s += 0.01) {
+    const auto j = hand.joint_poses_in_wrist(Handedness::right, user.posture(s));
+    const Pose& t = j[index_of(HandJoint::thumb_tip)];
+    const Vec3 f = 0.5 * (j[index_of(HandJoint::index_tip)].p + j[index_of(HandJoint::middle_tip)].p);
+    const double gap = std::abs((f - t.p).norm() - span);
+    if (gap < best_gap) {
+      best_gap = gap;
+      const Vec3 pad = t.q * Vec3(0, -1, 0);  // the pad faces the joint frame's -y
+      angle = rad_to_deg(std::acos(std::clamp(pad.dot((f - t.p).normalized()), -1.0, 1.0)));
+    }
+  }
+  return angle;
+}
+}  // namespace
+
+// Without pronation the thumb meets the peg with the side of its tip, and the
+// lift wedges it into the peg (docs/peg-in-hole.md, state item 8).
+TEST(SimulatedUser, ThePronatedThumbsPadFacesTheFingerPads) {
+  PegInHoleConfig c;
+  EXPECT_LT(thumb_pad_angle_deg(c), 35.0);
+  c.sim_user.thumb_pronation_deg = 0.0;
+  EXPECT_GT(thumb_pad_angle_deg(c), 45.0);
 }

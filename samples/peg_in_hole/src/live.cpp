@@ -131,6 +131,7 @@ Result<TrialOutcome> run_one(const PegInHoleConfig& config, const TrialLayout& l
     engine::AppInputs extra;
     extra.servo_options.remove_finger_abduction = !setting.abduction;
     extra.servo_options.haptics_enabled = setting.haptics;
+    extra.servo_options.force_scale = config.devices.force_scale;
     extra.on_frame = [&trial](engine::FrameContext& c) { trial.on_frame(c); };
     auto report = run(scene, std::move(extra));
     if (!report) return report.error();

@@ -37,8 +37,20 @@ constexpr double kLoadingDuration_s = 0.8;
 // Closure past contact is what squeezes (the joint servos pull toward targets
 // inside the peg); past 2 the pads roll off the peg instead of pressing.
 constexpr double kMaxClosure = 2.0;
+// With touch, the least the weaker side of the pinch is let feel (grip N).
+constexpr double kLeastSideN = 1.0;
 
 }  // namespace
+
+Result<HandShape> simulated_participant_hand(const SimUserOptions& o) {
+  auto shape = HandShape::from_measurements(o.hand_length_m, o.hand_width_m);
+  if (!shape) return shape.error();
+  HandShape::Finger& thumb = shape->fingers[static_cast<std::size_t>(Finger::thumb)];
+  thumb.q_wrist_metacarpal_rest =
+      (thumb.q_wrist_metacarpal_rest * Quat(Eigen::AngleAxisd(deg_to_rad(o.thumb_pronation_deg), Vec3::UnitZ())))
+          .normalized();
+  return shape;
+}
 
 SimulatedUser::SimulatedUser(const PegInHoleConfig& config, HandModel own_hand, std::uint64_t seed)
     : config_(config),
@@ -54,10 +66,10 @@ HandAngles SimulatedUser::posture(double s) const {
   // A tip pinch, thumb first: the thumb is set in opposition and held there
   // (it is placed on the peg by the wrist), index and middle curl onto the
   // far side as s grows, and squeeze by closing further.
-  set(HandDof::thumb_cmc_flexion, 30);
-  set(HandDof::thumb_cmc_abduction, 40);
-  set(HandDof::thumb_mcp_flexion, 20);
-  set(HandDof::thumb_ip_flexion, 15);
+  set(HandDof::thumb_cmc_flexion, o_.thumb_cmc_flexion_deg);
+  set(HandDof::thumb_cmc_abduction, o_.thumb_cmc_abduction_deg);
+  set(HandDof::thumb_mcp_flexion, o_.thumb_mcp_flexion_deg);
+  set(HandDof::thumb_ip_flexion, o_.thumb_ip_flexion_deg);
   // The fingers curl to a pinch shape by s = 1; past that only the MCP
   // flexes, so squeezing presses the pads into the peg instead of rolling
   // them off it onto the middle phalanges (which the devices cannot render).
@@ -140,15 +152,21 @@ Pose SimulatedUser::seen_peg(const Percept& p) {
   return T;
 }
 
-double SimulatedUser::felt_grip(const Percept& p) const {
-  // Pressure and skin stretch together: a pad touching at an angle is felt
-  // as much through shear as through normal force.
+double SimulatedUser::felt_peak(const Percept& p) const {
+  // Grip is felt as pressure, the largest on any finger, as the colour shows
+  // it; the shear is the load (wanted_grip_n). Counting the load as grip made
+  // the hand open as the weight came on.
   double f = 0.0;
-  for (std::size_t i = 0; i < kFingerCount; ++i) f = std::max(f, std::hypot(p.felt_normal_n[i], p.felt_shear_n[i]));
+  for (double v : p.felt_normal_n) f = std::max(f, v);
   return f;
 }
 
-bool SimulatedUser::contact_felt(const Percept& p) const { return felt_grip(p) > 0.15; }
+bool SimulatedUser::contact_felt(const Percept& p) const {
+  for (std::size_t i = 0; i < kFingerCount; ++i) {
+    if (std::hypot(p.felt_normal_n[i], p.felt_shear_n[i]) > 0.15) return true;
+  }
+  return false;
+}
 
 double SimulatedUser::seen_force(const Percept& p) {
   return std::max(0.0, force_from_colour(p.peg_rgba, config_.peg.colour_scale_max_n) +
@@ -240,7 +258,7 @@ double SimulatedUser::wanted_grip_n(const Percept& p) const {
   // with the load felt as shear; never knowingly near the break force.
   double shear = 0.0;
   for (double v : p.felt_shear_n) shear = std::max(shear, v);
-  return std::min(std::max(grip_target_n_, o_.grip_load_ratio * shear / config_.peg.friction),
+  return std::min(std::max(grip_target_n_, o_.grip_load_ratio * felt_gain_ * shear / config_.peg.friction),
                   config_.peg.break_force_n - 0.6);
 }
 
@@ -257,29 +275,36 @@ double SimulatedUser::closure_correction(double seen_n, double wanted_n) const {
 
 bool SimulatedUser::regulate_grip(const Percept& p, double dt, double look_interval_scale) {
   const double wanted = wanted_grip_n(p);
-  // The eye checks the colour every reaction time, touch or not: the device
-  // renders the force in the fingertip's frame, which understates a pad
-  // pressing at an angle, so the colour overrules a touch that feels light.
+  const double peak = felt_peak(p);
+  // The eye checks the colour every reaction time, touch or not, and each
+  // look recalibrates what a felt newton means (the colour shows the largest
+  // fingertip force, so it is matched with the largest felt one).
   const bool look = now_ >= next_visual_check_;
   if (look) {
     last_seen_n_ = seen_force(p);
     next_visual_check_ = now_ + static_cast<TimeNs>(look_interval_scale * o_.visual_reaction_s * 1e9);
-  }
-  const bool colour_alarm = last_seen_n_ > config_.peg.break_force_n - 1.0;
-  if (!touch_missing_ && !colour_alarm) {
-    const double felt = felt_grip(p) + rng_.normal(0.0, o_.haptic_force_noise_n);
-    if (wanted < o_.felt_ceiling_n || felt < o_.felt_ceiling_n) {
-      // Touch can tell: servo the felt force (up to what the device renders).
-      const double target = std::min(wanted, o_.felt_ceiling_n);
-      s_ += std::clamp(0.08 * (target - felt), -0.5, 0.5) * dt * 4.0;
-      s_ = std::clamp(s_, s_open_, kMaxClosure);
-      // Above the ceiling, a dip of the felt force is noise, not news: the
-      // last look at the colour still stands.
-      return wanted < o_.felt_ceiling_n ? std::abs(felt - wanted) < 0.5 : last_visual_ok_;
+    if (!touch_missing_ && peak > 0.2 && last_seen_n_ > 1.0) {
+      felt_gain_ = std::clamp(felt_gain_ + 0.2 * (last_seen_n_ / peak - felt_gain_), 0.5, 20.0);
     }
   }
-  // Past what the device renders, without touch, or when the colour warns:
-  // by eye.
+  const bool colour_alarm = last_seen_n_ > config_.peg.break_force_n - 1.0;
+  if (!touch_missing_ && !colour_alarm && peak < o_.felt_ceiling_n) {
+    // Touch can tell: servo the felt grip, read through the learnt gain, as
+    // the eye would the colour, but every moment instead of every look.
+    const double grip = felt_gain_ * (peak + felt_err_);
+    double error = wanted - grip;
+    // The weaker side (thumb, or the fingers together) fading means the peg
+    // is about to drop out, as when it lies on the fingers and the thumb only
+    // steadies it: squeeze, though never knowingly toward the break.
+    double fingers = 0.0;
+    for (std::size_t i = 1; i < kFingerCount; ++i) fingers += p.felt_normal_n[i];
+    const double weaker = felt_gain_ * (std::min(p.felt_normal_n[0], fingers) + felt_err_);
+    error = std::max(error, std::min(kLeastSideN - weaker, config_.peg.break_force_n - 1.0 - grip));
+    s_ += std::clamp(0.08 * error, -0.5, 0.5) * dt * 4.0;
+    s_ = std::clamp(s_, s_open_, kMaxClosure);
+    return std::abs(grip - wanted) < 0.5;
+  }
+  // The device saturates, there is no touch, or the colour warns: by eye.
   if (look) {
     s_ += closure_correction(last_seen_n_, wanted);
     last_visual_ok_ = std::abs(last_seen_n_ - wanted) < 0.7 && !colour_alarm;
@@ -296,6 +321,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
     percept_p_err_[k] = ou(percept_p_err_[k], o_.visual_position_noise_m, 0.3, dt, rng_);
     percept_r_err_[k] = ou(percept_r_err_[k], o_.visual_angle_noise_rad, 0.3, dt, rng_);
   }
+  felt_err_ = ou(felt_err_, o_.haptic_force_noise_n, 0.1, dt, rng_);
   const Pose peg = seen_peg(p);
   {
     const double k = std::min(1.0, dt / 0.3);
@@ -321,8 +347,13 @@ HandCommand SimulatedUser::act(const Percept& p) {
     const Vec3 ax = peg_axis(peg);
     const double radial = (d - d.dot(ax) * ax).norm();
     if (radial > config_.peg.radius_m + 0.035 || std::abs(d.dot(ax)) > 0.5 * config_.peg.length_m) {
-      if (touch_missing_) feedforward_ = std::min(0.3, feedforward_ + 0.015);
-      else grip_target_n_ = std::min(config_.peg.break_force_n - 0.6, grip_target_n_ + 0.2);
+      // Squeeze harder next time only when the grip looked weak: most drops
+      // come from a peg knocked or turned out of the fingers, and raising the
+      // grip for those walked it up to the break over a session.
+      if (last_seen_n_ < grip_target_n_ - 0.7) {
+        if (touch_missing_) feedforward_ = std::min(0.3, feedforward_ + 0.015);
+        else grip_target_n_ = std::min(config_.peg.break_force_n - 0.6, grip_target_n_ + 0.2);
+      }
       ++regrasps_;
       release_because("slipped");
     }
@@ -429,6 +460,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
         s_ = std::min(target_s, s_ + o_.closing_speed * dt);
         if (s_ >= target_s - 1e-9 && t_phase > ff_done && now_ >= next_visual_check_) {
           const double seen = seen_force(p);
+          last_seen_n_ = seen;
           next_visual_check_ = now_ + static_cast<TimeNs>(o_.visual_reaction_s * 1e9);
           if (std::abs(seen - grip_target_n_) < 0.7 && seen < config_.peg.break_force_n - 1.0) {
             go(grasp_only_ ? Phase::release : Phase::lift);
@@ -540,17 +572,19 @@ HandCommand SimulatedUser::act(const Percept& p) {
       break;
     case Phase::release: {
       // Open the hand where it is (moving a closed hand away drags the peg
-      // along), then take it up and back; then look again.
+      // along), then take it up and back; then look again. (The phase may
+      // have begun this tick, above.)
+      const double t_release = 1e-9 * static_cast<double>(now_ - phase_start_);
       s_ = std::max(s_open_, s_ - 3.0 * dt);
-      if (t_phase >= 0.3 && move_to_.p.y() < cmd_.p.y() + 0.05) {
+      if (t_release >= 0.3 && move_to_.p.y() < cmd_.p.y() + 0.05) {
         Pose away = cmd_;
         away.p += Vec3(0.0, 0.06, 0.12);
         start_move(away, 0.5);
-      } else if (t_phase < 0.3) {
+      } else if (t_release < 0.3) {
         move_from_ = move_to_ = cmd_;
         move_duration_s_ = 0.0;
       }
-      if (t_phase > 0.9) go(Phase::wait_respawn);
+      if (t_release > 0.9) go(Phase::wait_respawn);
       break;
     }
   }

@@ -177,7 +177,7 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
   // The participant: its hand and its seed; it learns across trials, so a
   // resumed participant replays its familiarisation (its state is not saved).
   const std::uint64_t pseed = session->participant_seed();
-  auto shape = HandShape::from_measurements(config.sim_user.hand_length_m, config.sim_user.hand_width_m);
+  auto shape = simulated_participant_hand(config.sim_user);
   if (!shape) return shape.error();
   const HandModel hand(*shape);
   SimulatedUser user(config, hand, mix_seed(pseed, 0x55534552));

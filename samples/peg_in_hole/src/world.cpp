@@ -74,6 +74,7 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
   so.realtime_priority = false;
   so.remove_finger_abduction = !setting.abduction;
   so.haptics_enabled = setting.haptics;
+  so.force_scale = config.devices.force_scale;
   auto loop = haptics::ServoLoop::create(std::move(*sim), std::move(channels), so);
   if (!loop) return loop.error();
   w->servo_ = std::move(*loop);

@@ -78,6 +78,10 @@ struct DeviceOptions {
   // takes; 2.5 N m/rad puts 3-5 N within the fingers' range of motion (peg
   // probe, docs/peg-in-hole.md). Damping stays critical.
   double finger_joint_stiffness_nm_per_rad = 2.5;
+  // Rendered force per simulated newton (haptics::ServoLoopOptions::
+  // force_scale). 0.3 maps the 5 N break onto the 3-DOF platform's 1.5 N: at
+  // 1 every grip above 1.5 N feels the same, and touch cannot warn of a break.
+  double force_scale = 0.3;
 };
 
 struct RecordingOptions {
@@ -105,7 +109,7 @@ struct SimUserOptions {
   double visual_position_noise_m = 0.0008;
   double visual_angle_noise_rad = 0.008;
   double visual_force_noise_n = 0.5;   // reading 0-10 N off the white-blue colour (5% of the scale)
-  double haptic_force_noise_n = 0.15;
+  double haptic_force_noise_n = 0.05;  // device newtons, drifting over ~0.1 s
   double visual_reaction_s = 0.25;     // a corrective submovement after a visual check
   // Touch is faster than sight: the delay from a fingertip touching to the
   // hand stopping (tactile reaction, ~60-100 ms) against visual_reaction_s
@@ -118,9 +122,9 @@ struct SimUserOptions {
   // the felt load (grip-load coupling); without, close by feel-less feed-forward
   // and look at the colour.
   double grip_target_n = 3.4;
-  // The strongest force the participant has learnt its device renders (the
-  // 3-DOF platform clamps at 1.5 N): a felt target above it is never reached,
-  // so felt grip is regulated to at most this and the rest is closure.
+  // Touch is trusted while the device presses less than this (device
+  // newtons; the 3-DOF platform clamps at 1.5 N): above it a stronger grip
+  // feels no different, and the colour decides.
   double felt_ceiling_n = 1.3;
   double grip_load_ratio = 1.3;        // grip >= ratio * felt shear / friction
   double closing_speed = 1.2;          // posture closure per second
@@ -132,6 +136,16 @@ struct SimUserOptions {
   // fingers under the peg against its tilt).
   double index_abduction_rad = 0.22;
   double middle_abduction_rad = -0.2;
+  // The thumb of the pinch (degrees): nearly straight and fully abducted, so
+  // that with the pronation below its pad faces the finger pads.
+  double thumb_cmc_flexion_deg = 5, thumb_cmc_abduction_deg = 45, thumb_mcp_flexion_deg = -10,
+         thumb_ip_flexion_deg = -15;
+  // Axial rotation added to the participant's thumb metacarpal (about its long
+  // axis, toward the fingers). The hand model's CMC flexes and abducts but does
+  // not pronate, while a real thumb column turns 90-120 deg into opposition
+  // (Kapandji); without it the thumb meets the peg with the side of its tip
+  // and the lift wedges it into the peg (docs/peg-in-hole.md).
+  double thumb_pronation_deg = 90;
   double alignment_tolerance_m = 0.0015;
   double alignment_tolerance_rad = 0.03;
 };

@@ -24,6 +24,11 @@
 
 namespace proprio::peg_in_hole {
 
+// The simulated participant's hand: HandShape::from_measurements with the
+// thumb pronated by o.thumb_pronation_deg. The study runs its proxy hand on
+// the same shape.
+Result<HandShape> simulated_participant_hand(const SimUserOptions& o);
+
 struct Percept {
   TimeNs time_ns = 0;
   // Vision (exact here; the user adds its own perceptual noise).
@@ -62,6 +67,8 @@ class SimulatedUser {
   // touch and its feed-forward closure without.
   double grip_target_n() const noexcept { return grip_target_n_; }
   double feedforward_closure() const noexcept { return feedforward_; }
+  // Grip newtons per felt device newton, as learnt so far.
+  double felt_gain() const noexcept { return felt_gain_; }
 
   // The planned grasp posture at closure s (0 open .. ~2 closed), with the
   // planned ab/adduction.
@@ -72,7 +79,7 @@ class SimulatedUser {
   void plan_grasp(const Pose& T_world_peg_seen);
   void start_move(const Pose& to, double duration_s);
   Pose seen_peg(const Percept& p);
-  double felt_grip(const Percept& p) const;
+  double felt_peak(const Percept& p) const;  // the largest felt normal force
   double seen_force(const Percept& p);
   bool contact_felt(const Percept& p) const;
   double wanted_grip_n(const Percept& p) const;
@@ -122,6 +129,11 @@ class SimulatedUser {
   bool touch_noticed_ = false, touch_missing_ = false, last_visual_ok_ = false;
   TimeNs next_visual_check_ = 0, stable_since_ = -1;
   double last_seen_n_ = 0.0;  // the force last read off the peg's colour
+  // Newtons of grip (as the colour shows them) per felt device newton: the
+  // user learns it by matching colour and touch (the thesis's familiarisation
+  // exists for this). Starts naive at 1.
+  double felt_gain_ = 1.0;
+  double felt_err_ = 0.0;  // the felt force's error of the moment (device newtons)
   double ff_closure_this_grasp_ = 0.0;
   double contact_s_ = -1.0;
   int regrasps_ = 0, align_iterations_ = 0;

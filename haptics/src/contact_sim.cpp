@@ -64,7 +64,8 @@ Status CouplingOptions::validate() const {
 std::string ContactSimOptions::describe() const {
   std::ostringstream s;
   s << "contact sim: step " << timestep_s * 1e3 << " ms, Newton solver, elliptic cone, impratio " << impratio
-    << ", " << solver_iterations << " iterations, multiccd " << (multiccd ? "on" : "off") << "; contacts tau "
+    << ", " << solver_iterations << " iterations, tolerance " << solver_tolerance << ", multiccd "
+    << (multiccd ? "on" : "off") << "; contacts tau "
     << contact_time_constant_s * 1e3 << " ms, impedance " << contact_impedance_min << " -> " << contact_impedance_max
     << " over " << contact_impedance_width_m * 1e3 << " mm; fingertip force filter " << force_filter_time_constant_s * 1e3
     << " ms\n  " << coupling.describe();
@@ -89,6 +90,9 @@ Status ContactSimOptions::validate() const {
   if (!(impratio >= 1.0 && impratio <= 100.0)) return bad_option("impratio", "must be in [1, 100]", impratio);
   if (solver_iterations < 1 || solver_iterations > 1000) {
     return bad_option("solver_iterations", "must be in [1, 1000]", solver_iterations);
+  }
+  if (!(solver_tolerance >= 1e-12 && solver_tolerance <= 1e-3)) {
+    return bad_option("solver_tolerance", "must be in [1e-12, 1e-3]", solver_tolerance);
   }
   if (!finite_positive(hand_density_kg_m3)) return bad_option("hand_density_kg_m3", "must be > 0", hand_density_kg_m3);
   if (!(force_filter_time_constant_s >= 0.0 && force_filter_time_constant_s <= 0.05)) {
@@ -259,7 +263,8 @@ Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, 
   m.s << "<mujoco model=\"proprio_haptics\">\n"
       << "  <compiler angle=\"radian\" inertiafromgeom=\"auto\"/>\n"
       << "  <option timestep=\"" << o.timestep_s << "\" integrator=\"Euler\" solver=\"Newton\" cone=\"elliptic\" impratio=\""
-      << o.impratio << "\" iterations=\"" << o.solver_iterations << "\" gravity=\"";
+      << o.impratio << "\" iterations=\"" << o.solver_iterations << "\" tolerance=\"" << o.solver_tolerance
+      << "\" gravity=\"";
   m.vec(scene.gravity_in_world);
   m.s << "\">\n"
       << "    <flag multiccd=\"" << (o.multiccd ? "enable" : "disable") << "\"/>\n"
@@ -479,6 +484,7 @@ struct ContactSimulation::Impl {
   std::vector<bool> geom_hand;    // per geom: part of the proxy
   std::vector<int> hand_bodies;   // gravity compensation
   std::vector<int> object_body_of_geom;  // per geom: scene body id, or -1
+  std::vector<bool> geom_on_free_object;  // per geom: part of a movable scene object
   std::vector<int> free_bodies;          // free scene objects, scene order
   std::vector<std::string> free_names;
 
@@ -562,7 +568,7 @@ struct ContactSimulation::Impl {
     std::array<Vec3, kFingerCount> f_world;
     f_world.fill(Vec3::Zero());
     std::array<int, kFingerCount> count{};
-    std::array<double, kFingerCount> depth{}, pressing{};
+    std::array<double, kFingerCount> depth{}, pressing{}, pressing_objects{};
     for (int i = 0; i < data->ncon; ++i) {
       const mjContact& c = data->contact[i];
       const int f1 = geom_finger[static_cast<std::size_t>(c.geom1)];
@@ -574,15 +580,16 @@ struct ContactSimulation::Impl {
       // points from geom1 to geom2 and the force acts on geom2 (-f on geom1).
       Vec3 f = Vec3::Zero();
       for (int r = 0; r < 3; ++r) f += local[r] * Vec3(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
-      const auto add = [&](int finger, const Vec3& force) {
+      const auto add = [&](int finger, const Vec3& force, int other_geom) {
         const auto fi = static_cast<std::size_t>(finger);
         f_world[fi] += force;
         ++count[fi];
         depth[fi] = std::max(depth[fi], -c.dist);
         pressing[fi] += local[0];
+        if (geom_on_free_object[static_cast<std::size_t>(other_geom)]) pressing_objects[fi] += local[0];
       };
-      if (f2 >= 0) add(f2, f);
-      if (f1 >= 0) add(f1, -f);
+      if (f2 >= 0) add(f2, f, c.geom1);
+      if (f1 >= 0) add(f1, -f, c.geom2);
     }
     const double dt = options.timestep_s, tau = options.force_filter_time_constant_s;
     const double alpha = dt / (tau + dt);
@@ -595,6 +602,7 @@ struct ContactSimulation::Impl {
       tip.force.shear_x_n += alpha * (tip.raw.shear_x_n - tip.force.shear_x_n);
       tip.force.shear_z_n += alpha * (tip.raw.shear_z_n - tip.force.shear_z_n);
       tip.contact_normal_n += alpha * (pressing[fi] - tip.contact_normal_n);
+      tip.object_normal_n += alpha * (pressing_objects[fi] - tip.object_normal_n);
       tip.contact_count = count[fi];
       tip.max_penetration_m = depth[fi];
     }
@@ -660,6 +668,12 @@ Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model,
       impl->free_bodies.push_back(b);
       impl->free_names.push_back(o.name);
     }
+  }
+  impl->geom_on_free_object.assign(static_cast<std::size_t>(m->ngeom), false);
+  for (int g = 0; g < m->ngeom; ++g) {
+    const int b = impl->object_body_of_geom[static_cast<std::size_t>(g)];
+    impl->geom_on_free_object[static_cast<std::size_t>(g)] =
+        b > 0 && std::find(impl->free_bodies.begin(), impl->free_bodies.end(), b) != impl->free_bodies.end();
   }
   for (int k = 0; k < mjNWARNING; ++k) impl->warnings_seen[static_cast<std::size_t>(k)] = impl->data->warning[k].number;
 

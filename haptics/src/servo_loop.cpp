@@ -163,6 +163,7 @@ void ServoLoop::tick(TimeNs now) noexcept {
   for (std::size_t f = 0; f < kFingerCount; ++f) {
     snap.contact[f] = simulation_.fingertips()[f].force;
     snap.contact_normal_n[f] = simulation_.fingertips()[f].contact_normal_n;
+    snap.object_normal_n[f] = simulation_.fingertips()[f].object_normal_n;
   }
   for (std::size_t i = 0; i < channels_.size(); ++i) {
     const ServoChannel& c = channels_[i];

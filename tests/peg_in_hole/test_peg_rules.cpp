@@ -133,6 +133,11 @@ TEST(PegConfig, TomlOverridesAndClearErrors) {
   EXPECT_DOUBLE_EQ(scaled->devices.force_scale, 0.5);
   EXPECT_DOUBLE_EQ(scaled->sim_user.thumb_pronation_deg, 0.0);
   EXPECT_FALSE(PegInHoleConfig::parse("[devices]\nforce_scale = 0\n"));
+  EXPECT_DOUBLE_EQ(c->devices.solver_tolerance, 1e-5);
+  auto tight = PegInHoleConfig::parse("[devices]\nsolver_tolerance = 1e-8\n");
+  ASSERT_TRUE(tight) << tight.error().message;
+  EXPECT_DOUBLE_EQ(contact_sim_options(*tight).solver_tolerance, 1e-8);
+  EXPECT_FALSE(PegInHoleConfig::parse("[devices]\nsolver_tolerance = 0.01\n"));
   auto unknown = PegInHoleConfig::parse("[peg]\nradius = 0.02\n", "t.toml");
   ASSERT_FALSE(unknown);
   EXPECT_NE(unknown.error().message.find("radius_m"), std::string::npos) << unknown.error().message;
@@ -252,7 +257,7 @@ TEST(PegConditions, WithoutHapticsTheDevicesGetZeroWhileContactsStay) {
       const HandCommand cmd = user.act(p);
       w->submit_hand(cmd.T_world_wrist, cmd.angles);
       w->step();
-      max_contact = std::max(max_contact, grasp_force_n(w->snapshot().contact_normal_n));
+      max_contact = std::max(max_contact, grasp_force_n(w->snapshot().object_normal_n));
       for (std::size_t ch = 0; ch < w->snapshot().channel_count; ++ch) {
         max_commanded = std::max(max_commanded, w->snapshot().channels[ch].commanded.in_tip_frame().norm());
         max_measured = std::max(max_measured, w->snapshot().channels[ch].measured.in_tip_frame().norm());

@@ -80,10 +80,14 @@ TEST(EngineXr, RendersBothEyesIntoTheRuntimesSwapchains) {
       EXPECT_EQ(magenta, 0u) << file;
       eyes[static_cast<std::size_t>(v)] = std::move(*img);
     }
-    // Two eyes 63 mm apart see different images.
+    // Two eyes 63 mm apart see different images. How many pixels differ
+    // depends on where the real-time scripted hand is when the frame is
+    // captured (as few as 0.08% were seen on a loaded 2-core machine), so the
+    // check is only that they differ: one view rendered twice is
+    // bit-identical on lavapipe.
     auto diff = render::compare_images(eyes[0], eyes[1]);
     ASSERT_TRUE(diff);
-    EXPECT_GT(diff->fraction_over_threshold, 0.001) << "frame " << frame;
+    EXPECT_GT(diff->fraction_over_threshold, 0.0) << "frame " << frame;
   }
 }
 

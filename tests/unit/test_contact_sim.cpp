@@ -127,24 +127,31 @@ TEST(ContactSim, FingertipUnderAWeightFeelsItAlongThePadNormal) {
   block.fixed = false;
   block.mass_kg = mass;
   scene.objects.push_back(block);
-  auto sim = ContactSimulation::create(model, Handedness::right, scene);
-  ASSERT_TRUE(sim) << sim.error().message;
-  sim->reset_hand(T_world_wrist, HandAngles{});
-  for (int i = 0; i < 1000; ++i) sim->step();
-  const FingertipContact& tip = sim->fingertip(Finger::index);
-  const double weight = mass * 9.81;
-  EXPECT_NEAR(tip.force.normal_n, weight, 0.03 * weight);
-  EXPECT_NEAR(tip.contact_normal_n, weight, 0.03 * weight) << "pad square to the load: the same force";
-  EXPECT_LT(tip.force.shear_magnitude_n(), 0.05 * weight);
-  EXPECT_GT(tip.contact_count, 0);
-  EXPECT_LT(tip.max_penetration_m, 0.002);
-  for (Finger f : {Finger::thumb, Finger::middle, Finger::ring, Finger::little}) {
-    EXPECT_EQ(sim->fingertip(f).force.normal_n, 0.0) << static_cast<int>(f);
+  // The peg-in-hole study's looser solver tolerance must feel the same weight.
+  for (double tolerance : {1e-8, 1e-5}) {
+    SCOPED_TRACE(tolerance);
+    ContactSimOptions o;
+    o.solver_tolerance = tolerance;
+    auto sim = ContactSimulation::create(model, Handedness::right, scene, o);
+    ASSERT_TRUE(sim) << sim.error().message;
+    sim->reset_hand(T_world_wrist, HandAngles{});
+    for (int i = 0; i < 1000; ++i) sim->step();
+    const FingertipContact& tip = sim->fingertip(Finger::index);
+    const double weight = mass * 9.81;
+    EXPECT_NEAR(tip.force.normal_n, weight, 0.03 * weight);
+    EXPECT_NEAR(tip.contact_normal_n, weight, 0.03 * weight) << "pad square to the load: the same force";
+    EXPECT_NEAR(tip.object_normal_n, tip.contact_normal_n, 1e-12) << "the movable block is all it touches";
+    EXPECT_LT(tip.force.shear_magnitude_n(), 0.05 * weight);
+    EXPECT_GT(tip.contact_count, 0);
+    EXPECT_LT(tip.max_penetration_m, 0.002);
+    for (Finger f : {Finger::thumb, Finger::middle, Finger::ring, Finger::little}) {
+      EXPECT_EQ(sim->fingertip(f).force.normal_n, 0.0) << static_cast<int>(f);
+    }
+    // The block is still on the finger.
+    auto block_pose = sim->object_pose("block");
+    ASSERT_TRUE(block_pose);
+    EXPECT_NEAR(block_pose->p.y(), block.T_world_object.p.y(), 0.006);  // the finger's servos give a little
   }
-  // The block is still on the finger.
-  auto block_pose = sim->object_pose("block");
-  ASSERT_TRUE(block_pose);
-  EXPECT_NEAR(block_pose->p.y(), block.T_world_object.p.y(), 0.006);  // the finger's servos give a little
 }
 
 // Fingertips pressed onto a table and dragged: shear opposes the motion and
@@ -180,6 +187,7 @@ TEST(ContactSim, SlidingGivesShearOpposingTheMotionWithinTheFrictionCone) {
   ASSERT_GT(pressed_tip.contact_count, 0);
   EXPECT_NEAR(pressed_tip.contact_normal_n, pressed_tip.f_in_world.y(), 0.05 * pressed_tip.f_in_world.y());
   EXPECT_LT(pressed_tip.force.normal_n, 0.98 * pressed_tip.contact_normal_n);
+  EXPECT_EQ(pressed_tip.object_normal_n, 0.0) << "a fixed table is not a held object";
   int touching = 0, sliding_samples = 0;
   for (int i = 0; i < 600; ++i) {
     sim->set_target(Pose{pressed.q, pressed.p + Vec3(0.05 * i * 1e-3, 0, 0)}, pointing);
@@ -278,6 +286,11 @@ TEST(ContactSim, RejectsBadOptionsAndNonFiniteTargets) {
   auto bad = ContactSimulation::create(test_hand(), Handedness::right, empty_scene(), o);
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.error().message.find("wrist_time_constant_s"), std::string::npos);
+  ContactSimOptions loose;
+  loose.solver_tolerance = 0.1;
+  auto too_loose = ContactSimulation::create(test_hand(), Handedness::right, empty_scene(), loose);
+  ASSERT_FALSE(too_loose);
+  EXPECT_NE(too_loose.error().message.find("solver_tolerance"), std::string::npos);
 
   HapticScene dup = empty_scene();
   dup.objects.push_back(SceneObject::sphere("a", 0.01, Pose{}));

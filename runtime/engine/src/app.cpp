@@ -88,7 +88,7 @@ std::string AppReport::describe() const {
 
 Status App::Impl::build_servo() {
   if (inputs.haptic_channels.empty()) return {};
-  auto sim = haptics::ContactSimulation::create(*hand_model, options.hand, scene.haptic_scene());
+  auto sim = haptics::ContactSimulation::create(*hand_model, options.hand, scene.haptic_scene(), inputs.contact_options);
   if (!sim) return sim.error().with_context("building the contact simulation for scene '" + scene.name + "'");
   // Start the proxy where the tracked hand is, or above the focus.
   Pose T_world_wrist{Quat::Identity(), scene.p_focus_in_world + Vec3(0, 0.25, 0.15)};

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "proprio/peg_in_hole/protocol.hpp"
+#include "proprio/peg_in_hole/world.hpp"
 #include "proprio/study/session.hpp"
 
 namespace proprio::peg_in_hole {
@@ -46,7 +47,7 @@ void LiveTrial::on_frame(engine::FrameContext& c) {
   elapsed_s_ = carried_s_ + 1e-9 * static_cast<double>(c.time_ns - start_ns_);
   double force = 0.0;
   if (c.servo != nullptr) {
-    force = grasp_force_n(c.servo->contact_normal_n);
+    force = grasp_force_n(c.servo->object_normal_n);
     if (std::isfinite(force)) {
       peak_ = std::max(peak_, force);
       if (force > 0.05) {
@@ -132,6 +133,7 @@ Result<TrialOutcome> run_one(const PegInHoleConfig& config, const TrialLayout& l
     extra.servo_options.remove_finger_abduction = !setting.abduction;
     extra.servo_options.haptics_enabled = setting.haptics;
     extra.servo_options.force_scale = config.devices.force_scale;
+    extra.contact_options = contact_sim_options(config);
     extra.on_frame = [&trial](engine::FrameContext& c) { trial.on_frame(c); };
     auto report = run(scene, std::move(extra));
     if (!report) return report.error();

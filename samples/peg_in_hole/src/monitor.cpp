@@ -5,9 +5,9 @@
 
 namespace proprio::peg_in_hole {
 
-double grasp_force_n(const std::array<double, kFingerCount>& contact_normal_n) noexcept {
+double grasp_force_n(const std::array<double, kFingerCount>& object_normal_n) noexcept {
   double f = 0.0;
-  for (double n : contact_normal_n) {
+  for (double n : object_normal_n) {
     if (std::isfinite(n)) f = std::max(f, n);
   }
   return f;

@@ -39,6 +39,12 @@ constexpr double kLoadingDuration_s = 0.8;
 constexpr double kMaxClosure = 2.0;
 // With touch, the least the weaker side of the pinch is let feel (grip N).
 constexpr double kLeastSideN = 1.0;
+// Pacing a held peg's movement (grip newtons): with touch it slows over this
+// band and stops this far below the break; without, it stops while the colour
+// last seen was this close to the break.
+constexpr double kHeldMoveSlowBandN = 0.8;
+constexpr double kHeldMoveStopMarginN = 0.4;
+constexpr double kHeldMoveColourMarginN = 1.2;
 
 }  // namespace
 
@@ -89,7 +95,8 @@ HandAngles SimulatedUser::posture(double s) const {
 void SimulatedUser::begin(TimeNs now_ns, const Pose& T_world_wrist_rest) {
   now_ = last_ = phase_start_ = now_ns;
   T_rest_ = cmd_ = move_from_ = move_to_ = T_world_wrist_rest;
-  move_duration_s_ = 0.0;
+  move_duration_s_ = move_elapsed_s_ = 0.0;
+  move_rate_ = 1.0;
   phase_ = Phase::wait_respawn;  // look first, then plan
   s_ = 0.0;
   touch_noticed_ = touch_missing_ = last_visual_ok_ = false;
@@ -136,7 +143,7 @@ void SimulatedUser::go(Phase next) {
 void SimulatedUser::start_move(const Pose& to, double duration_s) {
   move_from_ = cmd_;
   move_to_ = to;
-  move_start_ = now_;
+  move_elapsed_s_ = 0.0;
   // Speed-dependent endpoint noise (Harris & Wolpert 1998): the faster, the
   // further off the movement ends.
   const double dist = (to.p - cmd_.p).norm();
@@ -313,6 +320,26 @@ bool SimulatedUser::regulate_grip(const Percept& p, double dt, double look_inter
   return last_visual_ok_;
 }
 
+void SimulatedUser::pace_held_move(const Percept& p, double dt) {
+  // Moving a held peg loads the grip (its inertia, a knock on the hole's rim)
+  // and the user eases the movement as the grip nears the break, going on
+  // when it settles: with touch, on what it feels, every moment; without,
+  // only when a look at the colour warns.
+  double want = 1.0;
+  if (phase_ == Phase::lift || phase_ == Phase::rotate || phase_ == Phase::align || phase_ == Phase::insert) {
+    const double break_n = config_.peg.break_force_n;
+    if (!touch_missing_) {
+      const double grip = felt_gain_ * (felt_peak(p) + felt_err_);
+      want = std::clamp((break_n - kHeldMoveStopMarginN - grip) / kHeldMoveSlowBandN, 0.0, 1.0);
+    } else if (last_seen_n_ > break_n - kHeldMoveColourMarginN) {
+      want = 0.0;
+    }
+  }
+  // Not a step: the hand decelerates over a fraction of a second.
+  move_rate_ += std::min(1.0, dt / 0.05) * (want - move_rate_);
+  move_elapsed_s_ += move_rate_ * dt;
+}
+
 HandCommand SimulatedUser::act(const Percept& p) {
   const double dt = std::max(1e-4, 1e-9 * static_cast<double>(p.time_ns - last_));
   last_ = now_ = p.time_ns;
@@ -330,6 +357,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
     steady_peg_axis_ = (steady_peg_axis_ + k * (ax - steady_peg_axis_)).normalized();
     steady_peg_p_ += k * (peg.p - steady_peg_p_);
   }
+  pace_held_move(p, dt);
   const double t_phase = 1e-9 * static_cast<double>(now_ - phase_start_);
   const bool broken = p.peg_rgba[2] < 0.5f;  // red: broken
   const bool in_hand_phase = phase_ == Phase::lift || phase_ == Phase::rotate || phase_ == Phase::align ||
@@ -371,14 +399,14 @@ HandCommand SimulatedUser::act(const Percept& p) {
       break;
     }
     case Phase::reach:
-      if (now_ >= move_start_ + static_cast<TimeNs>(move_duration_s_ * 1e9)) {
+      if (move_done()) {
         plan_grasp(peg);  // a last look before the hand goes in
         start_move(T_standoff_, 0.5);
         go(Phase::approach);
       }
       break;
     case Phase::approach:
-      if (now_ >= move_start_ + static_cast<TimeNs>(move_duration_s_ * 1e9)) {
+      if (move_done()) {
         guard_stop_at_ = -1;
         guard_travel_m_ = 0.0;
         go(Phase::touch);
@@ -481,7 +509,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
     }
     case Phase::lift:
       regulate_grip(p, dt, loading_ ? 0.5 : 1.0);
-      if (loading_ && now_ >= move_start_ + static_cast<TimeNs>(move_duration_s_ * 1e9)) {
+      if (loading_ && move_done()) {
         loading_ = false;
         Pose up = cmd_;
         const double y_target = std::max(p.hole.p_entry_in_world.y(), cmd_.p.y() + o_.lift_height_m);
@@ -489,7 +517,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
         up.p.y() += rise;
         start_move(up, caution() * std::max(0.5, std::abs(rise) / (0.5 * o_.reach_speed_mps)));
         p_grasp_in_world_.y() += rise;
-      } else if (now_ >= move_start_ + static_cast<TimeNs>(move_duration_s_ * 1e9)) {
+      } else if (move_done()) {
         // Pronate the held peg horizontal: its top swings toward the hole (+x).
         const Quat q(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitZ()));
         start_move(rotate_about(cmd_, q, peg.p), caution() * o_.rotate_duration_s);
@@ -498,14 +526,14 @@ HandCommand SimulatedUser::act(const Percept& p) {
       break;
     case Phase::rotate:
       regulate_grip(p, dt);
-      if (now_ >= move_start_ + static_cast<TimeNs>(move_duration_s_ * 1e9)) {
+      if (move_done()) {
         align_iterations_ = 0;
         go(Phase::align);
       }
       break;
     case Phase::align: {
       regulate_grip(p, dt);
-      if (now_ < move_start_ + static_cast<TimeNs>((move_duration_s_ + o_.visual_reaction_s) * 1e9)) break;
+      if (!move_done(o_.visual_reaction_s)) break;
       // Where the peg should be: axis along the hole, leading end 1.5 cm before the entry.
       const HoleGeometry& h = p.hole;
       Vec3 ax = steady_peg_axis_;
@@ -545,7 +573,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
       const Vec3 lateral = d - depth * h.axis_in_world;
       const double angle_err = std::acos(std::clamp(ax.dot(h.axis_in_world), -1.0, 1.0));
       // Push on along the axis while steering the lateral error out by eye.
-      insert_progress_m_ += o_.insert_speed_mps / caution() * dt;
+      insert_progress_m_ += o_.insert_speed_mps / caution() * move_rate_ * dt;
       Pose target = cmd_;
       target.p = insert_origin_ + insert_progress_m_ * h.axis_in_world;
       const double steer = std::min(1.0, dt / 0.25);
@@ -591,7 +619,7 @@ HandCommand SimulatedUser::act(const Percept& p) {
 
   // The commanded wrist along the current movement.
   if (phase_ != Phase::insert && phase_ != Phase::touch) {
-    const double u = move_duration_s_ > 0 ? 1e-9 * static_cast<double>(now_ - move_start_) / move_duration_s_ : 1.0;
+    const double u = move_duration_s_ > 0 ? move_elapsed_s_ / move_duration_s_ : 1.0;
     cmd_ = lerp_pose(move_from_, move_to_, min_jerk(u));
   }
   // Motor noise on top (OU: tremor-like drift, not white jitter).

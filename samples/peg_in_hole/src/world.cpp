@@ -1,4 +1,3 @@
-#include <cmath>
 #include "proprio/peg_in_hole/world.hpp"
 
 #include <fmt/format.h>
@@ -24,6 +23,16 @@ Result<std::shared_ptr<const haptics::FingertipDeviceModel>> load_device_model(c
   return std::shared_ptr<const haptics::FingertipDeviceModel>(std::move(*m));
 }
 
+haptics::ContactSimOptions contact_sim_options(const PegInHoleConfig& config) {
+  haptics::ContactSimOptions o;
+  o.coupling.joint_stiffness_nm_per_rad = config.devices.finger_joint_stiffness_nm_per_rad;
+  // Critically damped at the new stiffness (contact_sim.hpp: 2 sqrt(k I)).
+  o.coupling.joint_damping_nms_per_rad =
+      2.0 * std::sqrt(o.coupling.joint_stiffness_nm_per_rad * o.coupling.joint_armature_kg_m2);
+  o.solver_tolerance = config.devices.solver_tolerance;
+  return o;
+}
+
 PegWorld::PegWorld(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting, WorldPhase phase)
     : config_(config),
       layout_(layout),
@@ -44,12 +53,7 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
     // Familiarisation has no hole to finish in.
     std::erase_if(scene.objects, [](const haptics::SceneObject& o) { return o.name == "hole_plate"; });
   }
-  haptics::ContactSimOptions cso;
-  cso.coupling.joint_stiffness_nm_per_rad = config.devices.finger_joint_stiffness_nm_per_rad;
-  // Critically damped at the new stiffness (contact_sim.hpp: 2 sqrt(k I)).
-  cso.coupling.joint_damping_nms_per_rad =
-      2.0 * std::sqrt(cso.coupling.joint_stiffness_nm_per_rad * cso.coupling.joint_armature_kg_m2);
-  auto sim = haptics::ContactSimulation::create(hand_model, Handedness::right, scene, cso);
+  auto sim = haptics::ContactSimulation::create(hand_model, Handedness::right, scene, contact_sim_options(config));
   if (!sim) return sim.error().with_context("peg-in-hole scene");
   if (phase == WorldPhase::spring) {
     const FamiliarisationOptions& f = config.familiarisation;
@@ -114,7 +118,7 @@ PegEvent PegWorld::step() {
   if (const haptics::ServoSnapshot* s = servo_->latest()) snapshot_ = *s;
   if (auto p = servo_->simulation().object_pose("peg")) peg_pose_ = *p;
 
-  const double force = grasp_force_n(snapshot_.contact_normal_n);
+  const double force = grasp_force_n(snapshot_.object_normal_n);
   if (std::isfinite(force)) {
     peak_force_n_ = std::max(peak_force_n_, force);
     if (force > 0.05) {

@@ -86,6 +86,11 @@ struct ContactSimOptions {
   // creep out of the fingers.
   double impratio = 10.0;
   int solver_iterations = 50;
+  // The Newton solver stops when an iteration improves its cost by less than
+  // this fraction (MuJoCo's `tolerance`, default 1e-8). 1e-5 cuts a
+  // peg-in-hole tick by about a fifth (solver Cholesky updates dominate);
+  // the forces it leaves out are far below what a fingertip device renders.
+  double solver_tolerance = 1e-8;
   // Multi-point convex collision: a cylinder resting on a flat face gets a
   // patch of contacts, not one wobbling point (peg in hole).
   bool multiccd = true;
@@ -111,6 +116,10 @@ struct FingertipContact {
   // normal forces along their contact normals. The fingertip frame's
   // normal_n is less whenever the pad meets the surface at an angle.
   double contact_normal_n = 0.0;
+  // Filtered, the part of contact_normal_n pressing on movable scene objects
+  // (what a hand can hold), not on fixed ones (a table, a plate): a held
+  // object's own load, for rules such as a peg that breaks when squeezed.
+  double object_normal_n = 0.0;
   int contact_count = 0;
   double max_penetration_m = 0.0;
 };

@@ -88,6 +88,7 @@ struct ServoSnapshot {
   HandPose proxy;  // the rendered hand
   std::array<FingertipForce, kFingerCount> contact{};  // the simulation's (filtered) fingertip forces
   std::array<double, kFingerCount> contact_normal_n{};  // FingertipContact::contact_normal_n
+  std::array<double, kFingerCount> object_normal_n{};   // FingertipContact::object_normal_n
   struct Channel {
     Finger finger = Finger::index;
     FingertipForce commanded;  // after the safety gate

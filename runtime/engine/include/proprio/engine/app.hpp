@@ -114,6 +114,9 @@ struct AppInputs {
   // Haptic devices, one per finger; empty: no haptics (the hand is drawn as tracked).
   std::vector<haptics::ServoChannel> haptic_channels;
   haptics::ServoLoopOptions servo_options;
+  // The contact simulation behind them (a study scene may need stiffer
+  // finger coupling than the default to lift its objects).
+  haptics::ContactSimOptions contact_options;
   std::shared_ptr<const HandModel> hand_model;  // for the proxy hand; a default adult hand when null
   // Headless, deterministic: the clock the hand source reads; the app
   // advances it each frame. Null: real time.

@@ -14,11 +14,13 @@
 namespace proprio::peg_in_hole {
 
 // The force that breaks the peg ("|lambda_N|"): the largest fingertip force
-// along the contact normals (haptics::FingertipContact::contact_normal_n).
-// Not the fingertip frame's normal: a pad meets the round peg at an angle (a
-// thumb often touches with its tip's end), and what falls on the pad frame's
-// shear axes would otherwise crush the bottle unnoticed.
-double grasp_force_n(const std::array<double, kFingerCount>& contact_normal_n) noexcept;
+// on the peg along the contact normals (haptics::FingertipContact::
+// object_normal_n: the peg is the scene's only movable object). Not the
+// fingertip frame's normal: a pad meets the round peg at an angle (a thumb
+// often touches with its tip's end), and what falls on the pad frame's shear
+// axes would otherwise crush the bottle unnoticed. Not a fingertip pressed on
+// the table or the hole's plate either: that does not squeeze the peg.
+double grasp_force_n(const std::array<double, kFingerCount>& object_normal_n) noexcept;
 
 // First-order low-pass of the grasp force and the break test on it. The
 // threshold is inclusive: a filtered force of exactly break_force_n breaks.

@@ -78,6 +78,8 @@ class SimulatedUser {
   enum class Phase { reach, approach, touch, close, lift, rotate, align, insert, done, release, wait_respawn };
   void plan_grasp(const Pose& T_world_peg_seen);
   void start_move(const Pose& to, double duration_s);
+  bool move_done(double extra_s = 0.0) const noexcept { return move_elapsed_s_ >= move_duration_s_ + extra_s; }
+  void pace_held_move(const Percept& p, double dt);
   Pose seen_peg(const Percept& p);
   double felt_peak(const Percept& p) const;  // the largest felt normal force
   double seen_force(const Percept& p);
@@ -119,7 +121,11 @@ class SimulatedUser {
   // Current commanded trajectory (min-jerk between two wrist poses).
   Pose move_from_, move_to_, cmd_;
   double move_duration_s_ = 0.0;
-  TimeNs move_start_ = 0;
+  // How far along the movement is, in its own time: a held peg's movement is
+  // paced by how hard the grip presses (pace_held_move), so this runs slower
+  // than the clock, or stops, while the grip is near the break.
+  double move_elapsed_s_ = 0.0;
+  double move_rate_ = 1.0;
   // Motor noise state (Ornstein-Uhlenbeck): wrist position, wrist rotation, fingers.
   Vec3 noise_p_ = Vec3::Zero(), noise_r_ = Vec3::Zero();
   std::array<double, kHandDofCount> noise_q_{};

@@ -94,5 +94,8 @@ class PegWorld {
 // The device model the sample uses by default: config/haptics/platform_3dof.toml
 // (3-DOF, Lee 2021's CHD), or devices.model from the config.
 Result<std::shared_ptr<const haptics::FingertipDeviceModel>> load_device_model(const PegInHoleConfig& config);
+// The contact simulation the study runs on, simulated or live: the proxy
+// fingers' coupling and the solver tolerance from [devices].
+haptics::ContactSimOptions contact_sim_options(const PegInHoleConfig& config);
 
 }  // namespace proprio::peg_in_hole

@@ -36,7 +36,8 @@ std::string ServoLoopOptions::describe() const {
   std::ostringstream s;
   s << "servo loop: period " << period_ns / 1000 << " us, " << (realtime_priority ? "SCHED_FIFO requested" : "normal priority")
     << ", stale hand after " << tracked_hand_timeout_ns / kNsPerMillisecond << " ms, finger AA "
-    << (remove_finger_abduction ? "removed" : "tracked") << ", haptics " << (haptics_enabled ? "on" : "off (zero output)") << ", force scale " << force_scale;
+    << (remove_finger_abduction ? "removed" : "tracked") << ", haptics " << (haptics_enabled ? "on" : "off (zero output)")
+    << ", force scale " << force_scale;
   return s.str();
 }
 

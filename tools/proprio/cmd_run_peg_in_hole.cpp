@@ -94,8 +94,11 @@ int run_peg_in_hole_impl(const RunArgs& a) {
     auto inputs = app_inputs_from(live, scene, *options);
     if (!inputs) return inputs.error();
     inputs->on_frame = std::move(extra.on_frame);
+    // The study's setting and physics; the CLI's own servo choices (priority, timing) stay.
     inputs->servo_options.remove_finger_abduction = extra.servo_options.remove_finger_abduction;
     inputs->servo_options.haptics_enabled = extra.servo_options.haptics_enabled;
+    inputs->servo_options.force_scale = extra.servo_options.force_scale;
+    inputs->contact_options = extra.contact_options;
     auto app = engine::App::create(std::move(scene), std::move(*inputs), *options);
     if (!app) return app.error();
     return run_app_until_done(**app);

@@ -130,9 +130,7 @@ Result<TrialOutcome> run_one(const PegInHoleConfig& config, const TrialLayout& l
   TrialOutcome out;
   while (true) {
     engine::AppInputs extra;
-    extra.servo_options.remove_finger_abduction = !setting.abduction;
-    extra.servo_options.haptics_enabled = setting.haptics;
-    extra.servo_options.force_scale = config.devices.force_scale;
+    extra.servo_options = servo_loop_options(config, setting);
     extra.contact_options = contact_sim_options(config);
     extra.on_frame = [&trial](engine::FrameContext& c) { trial.on_frame(c); };
     auto report = run(scene, std::move(extra));

@@ -33,6 +33,14 @@ haptics::ContactSimOptions contact_sim_options(const PegInHoleConfig& config) {
   return o;
 }
 
+haptics::ServoLoopOptions servo_loop_options(const PegInHoleConfig& config, Setting setting) {
+  haptics::ServoLoopOptions o;
+  o.remove_finger_abduction = !setting.abduction;
+  o.haptics_enabled = setting.haptics;
+  o.force_scale = config.devices.force_scale;
+  return o;
+}
+
 PegWorld::PegWorld(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting, WorldPhase phase)
     : config_(config),
       layout_(layout),
@@ -74,11 +82,8 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
     if (!dev) return dev.error().with_context("emulated fingertip device");
     channels.push_back({f, device_model, std::shared_ptr<haptics::FingertipSink>(std::move(*dev))});
   }
-  haptics::ServoLoopOptions so;
-  so.realtime_priority = false;
-  so.remove_finger_abduction = !setting.abduction;
-  so.haptics_enabled = setting.haptics;
-  so.force_scale = config.devices.force_scale;
+  haptics::ServoLoopOptions so = servo_loop_options(config, setting);
+  so.realtime_priority = false;  // stepped in simulated time, no thread
   auto loop = haptics::ServoLoop::create(std::move(*sim), std::move(channels), so);
   if (!loop) return loop.error();
   w->servo_ = std::move(*loop);

@@ -97,5 +97,8 @@ Result<std::shared_ptr<const haptics::FingertipDeviceModel>> load_device_model(c
 // The contact simulation the study runs on, simulated or live: the proxy
 // fingers' coupling and the solver tolerance from [devices].
 haptics::ContactSimOptions contact_sim_options(const PegInHoleConfig& config);
+// The servo loop for one setting, simulated or live: AA removed or not,
+// haptics on or off, and [devices] force_scale.
+haptics::ServoLoopOptions servo_loop_options(const PegInHoleConfig& config, Setting setting);
 
 }  // namespace proprio::peg_in_hole

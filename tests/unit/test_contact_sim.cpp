@@ -1,5 +1,6 @@
 // The MuJoCo contact simulation: the proxy hand's structure, coupling
 // stability, contact forces against analytic expectations, and tunnelling.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -127,13 +128,21 @@ TEST(ContactSim, FingertipUnderAWeightFeelsItAlongThePadNormal) {
   block.fixed = false;
   block.mass_kg = mass;
   scene.objects.push_back(block);
-  // The peg-in-hole study's looser solver tolerance must feel the same weight.
-  for (double tolerance : {1e-8, 1e-5}) {
-    SCOPED_TRACE(tolerance);
+  // The peg-in-hole study's looser solver tolerance and point contacts
+  // (no torsional friction) must feel the same weight.
+  struct Variant {
+    double tolerance;
+    bool torsion;
+  };
+  for (const Variant v : {Variant{1e-8, true}, Variant{1e-5, true}, Variant{1e-5, false}}) {
+    SCOPED_TRACE(fmt::format("tolerance {}, torsional friction {}", v.tolerance, v.torsion));
     ContactSimOptions o;
-    o.solver_tolerance = tolerance;
+    o.solver_tolerance = v.tolerance;
+    o.torsional_friction = v.torsion;
     auto sim = ContactSimulation::create(model, Handedness::right, scene, o);
     ASSERT_TRUE(sim) << sim.error().message;
+    EXPECT_NE(sim->mjcf().find(v.torsion ? "condim=\"4\"" : "condim=\"3\""), std::string::npos);
+    EXPECT_NE(o.describe().find(v.torsion ? "condim 4" : "condim 3"), std::string::npos) << o.describe();
     sim->reset_hand(T_world_wrist, HandAngles{});
     for (int i = 0; i < 1000; ++i) sim->step();
     const FingertipContact& tip = sim->fingertip(Finger::index);

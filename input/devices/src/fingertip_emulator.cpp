@@ -682,6 +682,7 @@ void FingertipEmulator::integrate(TimeNs from_ns, TimeNs to_ns) {
   const double kt = mp.torque_constant_nm_per_a;
   const double b = mp.viscous_friction_nms_per_rad;
   const bool bridges_on = latched_faults_ == 0;
+  const double current_decay = mp.inductance_h > 0.0 ? std::exp(-mp.resistance_ohm * h / mp.inductance_h) : 0.0;
   for (std::uint32_t step = 0; step < steps; ++step) {
     if (step > 0) load_ = plant_(output_angles());
     for (std::size_t i = 0; i < options_.motor_count; ++i) {
@@ -697,7 +698,7 @@ void FingertipEmulator::integrate(TimeNs from_ns, TimeNs to_ns) {
       } else if (mp.inductance_h > 0.0) {
         // Exact for the step's speed: the current relaxes to (u - e)/R with time constant L/R.
         const double steady = (u - kt * m.omega) / r;
-        m.current = steady + (m.current - steady) * std::exp(-r * h / mp.inductance_h);
+        m.current = steady + (m.current - steady) * current_decay;
       }
       if (m.stuck) {
         m.omega = 0.0;
@@ -712,6 +713,11 @@ void FingertipEmulator::integrate(TimeNs from_ns, TimeNs to_ns) {
         m.theta += h * m.omega;
       }
       m.sense_current = m.terminal_short && bridges_on ? m.voltage / kTerminalShortOhm : m.current;
+      // An idle motor's current and speed decay geometrically and would go
+      // subnormal, where x86 arithmetic runs about 100x slower: measured 5% of
+      // a simulated peg-in-hole study. Nothing physical is below these.
+      if (std::abs(m.current) < 1e-30) m.current = 0.0;
+      if (std::abs(m.omega) < 1e-30) m.omega = 0.0;
     }
   }
   load_ = plant_(output_angles());

@@ -112,12 +112,12 @@ std::string PegInHoleConfig::describe() const {
   return fmt::format(
       "peg r={:.2f} mm, h={:.1f} mm, {:.0f} g, breaks at {:.2f} N (filter {:.0f} ms); hole clearance {:.2f} mm; "
       "{} x 4 trials ({} familiarisation), timeout {:.0f} s; familiarisation {:.0f} + {:.0f} s; finger coupling "
-      "{:.2f} N m/rad, device force scale {:.2f}, contact solver tolerance {:.0e}",
+      "{:.2f} N m/rad, device force scale {:.2f}, contact solver tolerance {:.0e}, torsional friction {}",
       1e3 * peg.radius_m, 1e3 * peg.length_m, 1e3 * peg.mass_kg, peg.break_force_n,
       1e3 * peg.break_filter_time_constant_s, 1e3 * hole.clearance_m, main_task.repetitions,
       main_task.familiarisation_trials, main_task.trial_timeout_s, familiarisation.spring_phase_s,
       familiarisation.ground_phase_s, devices.finger_joint_stiffness_nm_per_rad, devices.force_scale,
-      devices.solver_tolerance);
+      devices.solver_tolerance, devices.torsional_friction ? "on" : "off");
 }
 
 Result<PegInHoleConfig> PegInHoleConfig::load_file(const std::filesystem::path& path) {
@@ -220,11 +220,13 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
     PEG_TRY(t, sub("devices"));
     if (t) {
       PEG_CHECK(t->check_keys("devices", {"fingers", "model", "finger_joint_stiffness_nm_per_rad", "force_scale",
-                                              "solver_tolerance"}));
+                                              "solver_tolerance", "torsional_friction"}));
       PEG_CHECK(read_double(*t, "finger_joint_stiffness_nm_per_rad", out.devices.finger_joint_stiffness_nm_per_rad,
                             0.05, 20.0));
       PEG_CHECK(read_double(*t, "force_scale", out.devices.force_scale, 0.01, 10.0));
       PEG_CHECK(read_double(*t, "solver_tolerance", out.devices.solver_tolerance, 1e-12, 1e-3));
+      PEG_TRY(torsion, t->get_bool_or("torsional_friction", out.devices.torsional_friction));
+      out.devices.torsional_friction = torsion;
       if (t->contains("fingers")) {
         PEG_TRY(names, t->get_strings("fingers"));
         out.devices.fingers.clear();

@@ -30,6 +30,7 @@ haptics::ContactSimOptions contact_sim_options(const PegInHoleConfig& config) {
   o.coupling.joint_damping_nms_per_rad =
       2.0 * std::sqrt(o.coupling.joint_stiffness_nm_per_rad * o.coupling.joint_armature_kg_m2);
   o.solver_tolerance = config.devices.solver_tolerance;
+  o.torsional_friction = config.devices.torsional_friction;
   return o;
 }
 

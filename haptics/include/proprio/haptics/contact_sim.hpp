@@ -91,6 +91,11 @@ struct ContactSimOptions {
   // peg-in-hole tick by about a fifth (solver Cholesky updates dominate);
   // the forces it leaves out are far below what a fingertip device renders.
   double solver_tolerance = 1e-8;
+  // Torsional friction (MuJoCo condim 4, a "soft finger"): a contact also
+  // resists spinning about its normal. Off gives condim 3, Coulomb friction
+  // at a point, which is all a 3-DOF fingertip device renders; a pad's patch
+  // of contacts (multiccd) still resists spin, more so the wider it is.
+  bool torsional_friction = true;
   // Multi-point convex collision: a cylinder resting on a flat face gets a
   // patch of contacts, not one wobbling point (peg in hole).
   bool multiccd = true;

@@ -86,6 +86,12 @@ struct DeviceOptions {
   // solver_tolerance): 1e-5 instead of MuJoCo's 1e-8 makes a simulated study
   // about a fifth faster and changes no force a device could render.
   double solver_tolerance = 1e-5;
+  // Fingertip contacts resist spin about their normal (haptics::
+  // ContactSimOptions::torsional_friction). Off: point contacts with Coulomb
+  // friction, the 3-DOF force the devices render. The pads' contact patches
+  // still hold the peg against spin, and a wider finger spread (AA) holds it
+  // better, as in a real pinch; docs/peg-in-hole.md has the measured effect.
+  bool torsional_friction = false;
 };
 
 struct RecordingOptions {

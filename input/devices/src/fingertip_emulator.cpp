@@ -714,8 +714,8 @@ void FingertipEmulator::integrate(TimeNs from_ns, TimeNs to_ns) {
       }
       m.sense_current = m.terminal_short && bridges_on ? m.voltage / kTerminalShortOhm : m.current;
       // An idle motor's current and speed decay geometrically and would go
-      // subnormal, where x86 arithmetic runs about 100x slower: measured 5% of
-      // a simulated peg-in-hole study. Nothing physical is below these.
+      // subnormal, where x86 arithmetic runs about 100x slower (perf: 5% of a
+      // simulated peg-in-hole trial). Nothing physical is below these.
       if (std::abs(m.current) < 1e-30) m.current = 0.0;
       if (std::abs(m.omega) < 1e-30) m.omega = 0.0;
     }

@@ -89,8 +89,9 @@ struct DeviceOptions {
   // Fingertip contacts resist spin about their normal (haptics::
   // ContactSimOptions::torsional_friction). Off: point contacts with Coulomb
   // friction, the 3-DOF force the devices render. The pads' contact patches
-  // still hold the peg against spin, and a wider finger spread (AA) holds it
-  // better, as in a real pinch; docs/peg-in-hole.md has the measured effect.
+  // still hold the peg against spin, and a wider finger spread (AA) should
+  // hold it better, as in a real pinch; docs/peg-in-hole.md (item 12) has
+  // what two runs measured.
   bool torsional_friction = false;
 };
 

@@ -283,7 +283,7 @@ TEST(FingertipEmulator, ForceModeRendersOneNewtonOnTheDefaultSpring) {
 
 // A latched fault opens the bridges and the moving motors coast down
 // geometrically; the emulator must land on exact zeros, not crawl through
-// subnormal numbers (x86 runs those ~100x slower: 5% of a simulated study).
+// subnormal numbers (x86 runs those ~100x slower: 5% of a simulated trial).
 TEST(FingertipEmulator, ACoastingMotorSettlesToExactZerosNotSubnormals) {
   FingertipEmulator e = make(bare_options());
   Host host;

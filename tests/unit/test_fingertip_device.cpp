@@ -396,6 +396,36 @@ TEST(FingertipDevice, ASilentDeviceIsDroppedAndReconnected) {
   ASSERT_TRUE(wait_until([&] { return rig.device.stats().connects >= 2; }));
 }
 
+// A host too busy to run the emulation in real time (a loaded CI machine
+// under ASan) must not make each catch-up longer than the last: the device
+// stalls instead, and says so in its stats.
+TEST(FingertipEmulatorServer, FallingFarBehindStallsTheDeviceInsteadOfCatchingUp) {
+  for (const DurationNs max_lag : {DurationNs{100 * kNsPerMillisecond}, DurationNs{0}}) {
+    SCOPED_TRACE(max_lag);
+    ManualClock clock(1'000 * kNsPerMillisecond);
+    auto link = std::make_shared<FakeHidLink>(clock);
+    FingertipServeOptions serve;
+    serve.max_lag_ns = max_lag;
+    FingertipEmulatorServer server(make_emulator({}), link, serve, clock);
+    server.start();
+    clock.advance(50 * kNsPerMillisecond);
+    server.pump();
+    EXPECT_EQ(server.emulator_stats().stalls, 0u) << "50 ms behind is within the allowance";
+    clock.advance(10'000 * kNsPerMillisecond);
+    server.pump();
+    const FingertipEmulatorStats stats = server.emulator_stats();
+    EXPECT_EQ(server.with_emulator([](const FingertipEmulator& e) { return e.now_ns(); }), 10'050 * kNsPerMillisecond);
+    if (max_lag > 0) {
+      EXPECT_EQ(stats.stalls, 1u);
+      EXPECT_EQ(stats.stalled_ticks, 9'999u) << "every tick but the one at 10.05 s";
+      EXPECT_EQ(stats.ticks, 52u);
+    } else {
+      EXPECT_EQ(stats.stalls, 0u);
+      EXPECT_EQ(stats.ticks, 10'051u);
+    }
+  }
+}
+
 TEST(FingertipDevice, CommandAndFeedbackNeitherAllocateNorFail) {
   Rig rig;
   ASSERT_TRUE(rig.device.start().ok());

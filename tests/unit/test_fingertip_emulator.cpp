@@ -302,6 +302,36 @@ TEST(FingertipEmulator, ACoastingMotorSettlesToExactZerosNotSubnormals) {
   EXPECT_EQ(subnormal, 0);
 }
 
+TEST(FingertipEmulator, SkipToStallsTheFirmwareWithoutRunningTheMissedTicks) {
+  FingertipEmulator e = make(bare_options());
+  Host host;
+  run_commanded(e, host, FingertipMode::force, {1.0, 0.3, 0}, 30 * kMs);
+  const FingertipEmulatorSnapshot before = e.snapshot();
+  const FingertipEmulatorStats stats_before = e.stats();
+  e.skip_to(e.now_ns());
+  EXPECT_EQ(e.stats().stalls, 0u) << "nothing was due";
+
+  e.skip_to(530 * kMs);
+  EXPECT_EQ(e.stats().stalls, 1u);
+  EXPECT_EQ(e.stats().stalled_ticks, 499u) << "the ticks at 31..529 ms";
+  EXPECT_EQ(e.stats().ticks, stats_before.ticks);
+  EXPECT_EQ(e.stats().feedback_sent, stats_before.feedback_sent);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(e.snapshot().motors[i].output_angle_rad, before.motors[i].output_angle_rad) << "motor " << i;
+  }
+
+  std::vector<FingertipEmulatedReport> out;
+  e.advance_to(530 * kMs, out);
+  ASSERT_EQ(out.size(), 1u);
+  auto f = decode_fingertip_feedback(out[0].bytes);
+  ASSERT_TRUE(f.ok());
+  EXPECT_EQ(f->device_time_us, 530'000u);
+  // One control period integrated, not the 500 ms gap: the pad barely moved.
+  EXPECT_NEAR(e.snapshot().motors[0].output_angle_rad, before.motors[0].output_angle_rad, 0.01);
+  // No command for 500 ms of device time: the watchdog trips, as a stalled device's would.
+  EXPECT_TRUE(e.snapshot().status & fingertip_status::watchdog_tripped);
+}
+
 TEST(FingertipEmulator, WatchdogReturnsToRestFiftyMillisecondsAfterTheLastCommand) {
   FingertipEmulator e = make(bare_options());
   Host host;

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <limits>
 
+#include "proprio/core/log.hpp"
+
 namespace proprio::devices {
 
 namespace {
@@ -420,6 +422,19 @@ void FingertipEmulator::advance_to(TimeNs t_ns) { run_until(t_ns, nullptr); }
 
 void FingertipEmulator::advance_to(TimeNs t_ns, std::vector<FingertipEmulatedReport>& out) { run_until(t_ns, &out); }
 
+void FingertipEmulator::skip_to(TimeNs t_ns) {
+  std::uint64_t skipped = 0;
+  while (tick_time_ns(next_tick_) < t_ns) {
+    ++next_tick_;
+    ++skipped;
+  }
+  if (skipped == 0) return;
+  // The next tick integrates one control period from here, not across the gap.
+  now_ns_ = tick_time_ns(next_tick_ - 1);
+  ++stats_.stalls;
+  stats_.stalled_ticks += skipped;
+}
+
 void FingertipEmulator::run_until(TimeNs t_ns, std::vector<FingertipEmulatedReport>* out) {
   for (;;) {
     const TimeNs tick_ns = tick_time_ns(next_tick_);
@@ -728,10 +743,12 @@ void FingertipEmulator::integrate(TimeNs from_ns, TimeNs to_ns) {
 
 std::string FingertipServeOptions::describe() const {
   char buf[200];
-  std::snprintf(buf, sizeof buf, "latency %.3g ms + up to %.3g ms jitter, pump every %.3g ms, seed %llu",
+  std::snprintf(buf, sizeof buf,
+                "latency %.3g ms + up to %.3g ms jitter, pump every %.3g ms, stall when %.3g ms behind, seed %llu",
                 static_cast<double>(latency_min_ns) / kNsPerMillisecond,
                 static_cast<double>(latency_jitter_ns) / kNsPerMillisecond,
-                static_cast<double>(pump_interval_ns) / kNsPerMillisecond, static_cast<unsigned long long>(seed));
+                static_cast<double>(pump_interval_ns) / kNsPerMillisecond,
+                static_cast<double>(max_lag_ns) / kNsPerMillisecond, static_cast<unsigned long long>(seed));
   return buf;
 }
 
@@ -766,6 +783,15 @@ FingertipEmulatorServer::~FingertipEmulatorServer() {
 void FingertipEmulatorServer::pump_locked(State& state, FakeHidLink& link) {
   if (!state.started) return;
   const TimeNs now = state.clock.now_ns() - state.t0;
+  const DurationNs behind = now - state.emulator.now_ns();
+  if (state.options.max_lag_ns > 0 && behind > state.options.max_lag_ns) {
+    if (state.emulator.stats().stalls == 0) {
+      logger().warn("emulated fingertip device: {:.0f} ms behind real time (the host is too busy to run it); it "
+                    "stalls instead of catching up",
+                    static_cast<double>(behind) / kNsPerMillisecond);
+    }
+    state.emulator.skip_to(now);
+  }
   state.out.clear();
   state.emulator.advance_to(now, state.out);
   for (const FingertipEmulatedReport& r : state.out) {

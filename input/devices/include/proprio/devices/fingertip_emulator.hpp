@@ -234,6 +234,8 @@ struct FingertipEmulatorStats {
   std::uint64_t clamped_commands = 0;
   std::uint64_t watchdog_trips = 0;
   std::uint64_t faults_latched = 0;
+  std::uint64_t stalls = 0;         // skip_to() calls that skipped ticks
+  std::uint64_t stalled_ticks = 0;  // control ticks never run, over all stalls
   FingertipLinkCounters link;  // the command stream as the device received it
 };
 
@@ -248,6 +250,11 @@ class FingertipEmulator {
   void advance_to(TimeNs t_ns, std::vector<FingertipEmulatedReport>& out);
   // The same, discarding the reports.
   void advance_to(TimeNs t_ns);
+  // The firmware stalled until t_ns: the ticks due before it never run and
+  // send nothing, the motors hold their state, and the next tick is the first
+  // at or after t_ns. What a host too busy to run the emulation in real time
+  // gets instead of an ever-growing backlog. Counted in stats().
+  void skip_to(TimeNs t_ns);
 
   // Host -> device: a command report received at t_ns (taken as the
   // emulator's current time if that is later). Checked at once (bytes,
@@ -348,6 +355,11 @@ struct FingertipServeOptions {
   // The pumping thread's period. The emulator runs up to the link's clock,
   // never ahead, so a command takes effect at the first tick after it arrives.
   DurationNs pump_interval_ns = kNsPerMillisecond;
+  // Where the emulation falls further behind the link's clock than this (a
+  // host too busy to run it in real time), the device stalls (skip_to) rather
+  // than catching up: each catch-up would take longer than the time it covers,
+  // holding the lock that host writes wait on, and never end. 0: never skip.
+  DurationNs max_lag_ns = 100 * kNsPerMillisecond;
   std::uint64_t seed = 1;  // latency draws
 
   std::string describe() const;

@@ -44,9 +44,10 @@ Result<devices::FingertipEmulator> make_device_emulator(std::shared_ptr<const Fi
   devices::FingertipPlant plant = [model](const std::array<double, devices::kFingertipMaxMotors>& q) {
     MotorAngles angles;
     for (std::size_t i = 0; i < kMaxDeviceMotors; ++i) angles.rad[i] = q[i];
+    const FingertipDeviceModel::Plant at_q = model->plant(angles);
     devices::FingertipPlantLoad load;
-    load.load_torque_nm = model->load_torques(angles);
-    const FingertipForce f = model->forward(angles);
+    load.load_torque_nm = at_q.load_torques_nm;
+    const FingertipForce& f = at_q.force;
     load.fsr_force_n = {f.normal_n, f.shear_x_n, f.shear_z_n};
     return load;
   };

@@ -161,18 +161,22 @@ class PlatformDevice final : public FingertipDeviceModel {
 
   FingertipForce forward(const MotorAngles& q) const noexcept override { return k_.force(k_.plate(k_.lengths(q))); }
 
+  std::array<double, kMaxDeviceMotors> load_torques(const MotorAngles& q) const noexcept override {
+    return plant(q).load_torques_nm;
+  }
+
   // A taut wire pulls its pulley toward unwinding; a wire that would have to
   // push is slack and loads nothing.
-  std::array<double, kMaxDeviceMotors> load_torques(const MotorAngles& q) const noexcept override {
-    std::array<double, kMaxDeviceMotors> tau{};
+  Plant plant(const MotorAngles& q) const noexcept override {
+    Plant out;
     const Vec3 p = k_.plate(k_.lengths(q));
-    const FingertipForce f = k_.force(p);
+    out.force = k_.force(p);
     Vec3 t;
-    if (!f.is_finite() || !k_.tensions(p, f.in_tip_frame(), t)) return tau;
+    if (!out.force.is_finite() || !k_.tensions(p, out.force.in_tip_frame(), t)) return out;
     for (std::size_t i = 0; i < 3; ++i) {
-      tau[i] = -p_.pulley_radius_m * std::max(0.0, t[static_cast<Eigen::Index>(i)]);
+      out.load_torques_nm[i] = -p_.pulley_radius_m * std::max(0.0, t[static_cast<Eigen::Index>(i)]);
     }
-    return tau;
+    return out;
   }
 
   MotorAngles rest() const noexcept override {

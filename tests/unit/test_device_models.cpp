@@ -436,6 +436,30 @@ TEST(DeviceModels, LoadTorquesDoVirtualWork) {
   }
 }
 
+// The emulator reads force and load from plant(): the same numbers as
+// forward() and load_torques(), at rest, pressing, and with a slack wire.
+// (The platform's load_torques() is plant()'s, which the torque tests above
+// check; its force here is computed apart, by forward().)
+TEST(DeviceModels, PlantIsForwardAndLoadTorquesAtOnce) {
+  for (const char* file : {"band_2dof.toml", "platform_3dof.toml", "force_vector.toml"}) {
+    const auto m = load(file);
+    ASSERT_TRUE(m) << file;
+    std::vector<MotorAngles> qs = {m->rest(), m->inverse(FingertipForce{0.8, 0.2, 0.3}),
+                                   m->inverse(FingertipForce{2.0, -0.5, 0.0})};
+    MotorAngles slack = m->rest();
+    slack.rad[0] -= 0.5;
+    qs.push_back(slack);
+    for (const MotorAngles& q : qs) {
+      const FingertipDeviceModel::Plant p = m->plant(q);
+      const FingertipForce f = m->forward(q);
+      EXPECT_EQ(p.force.normal_n, f.normal_n) << file;
+      EXPECT_EQ(p.force.shear_x_n, f.shear_x_n) << file;
+      EXPECT_EQ(p.force.shear_z_n, f.shear_z_n) << file;
+      EXPECT_EQ(p.load_torques_nm, m->load_torques(q)) << file;
+    }
+  }
+}
+
 // --- band force table validation -------------------------------------------------
 
 TEST(BandDevice, NonMonotoneTableIsRejectedNamingTheRow) {

@@ -104,6 +104,13 @@ class FingertipDeviceModel {
   // Torque the fingertip's reaction puts on each output shaft at q (the emulator's load), N·m,
   // positive in the direction of positive shaft angle.
   virtual std::array<double, kMaxDeviceMotors> load_torques(const MotorAngles& q) const noexcept = 0;
+  // Both at once, as the device emulator needs them at every physics substep;
+  // models whose two share their kinematics compute it once.
+  struct Plant {
+    FingertipForce force;
+    std::array<double, kMaxDeviceMotors> load_torques_nm{};
+  };
+  virtual Plant plant(const MotorAngles& q) const noexcept { return {forward(q), load_torques(q)}; }
   virtual MotorAngles rest() const noexcept = 0;  // zero rendered force (the band keeps its pretension)
   virtual std::string describe() const = 0;
 };

@@ -166,9 +166,15 @@ void object_geoms(Mjcf& m, const SceneObject& o, const std::string& indent) {
   };
   switch (o.shape) {
     case ShapeKind::box:
-      m.s << indent << "<geom type=\"box\" size=\"";
-      m.vec(o.half_extents_m);
-      m.s << '"';
+      if (o.contact_top_plane) {
+        // The plane's normal (its z) is the box's +y; its size only sets how MuJoCo draws it.
+        m.s << indent << "<geom type=\"plane\" size=\"" << o.half_extents_m.x() << ' ' << o.half_extents_m.z()
+            << " 1\" pos=\"0 " << o.half_extents_m.y() << " 0\" zaxis=\"0 1 0\"";
+      } else {
+        m.s << indent << "<geom type=\"box\" size=\"";
+        m.vec(o.half_extents_m);
+        m.s << '"';
+      }
       common(o.name);
       m.s << "/>\n";
       break;

@@ -39,6 +39,9 @@ Status SceneObject::validate() const {
       std::abs(T_world_object.q.norm() - 1.0) > 1e-6) {
     return object_error(*this, "pose must be finite with a unit quaternion");
   }
+  if (contact_top_plane && (shape != ShapeKind::box || !fixed)) {
+    return object_error(*this, "contact_top_plane is for fixed boxes only (a table top)");
+  }
   switch (shape) {
     case ShapeKind::box:
       if (!positive(half_extents_m.x()) || !positive(half_extents_m.y()) || !positive(half_extents_m.z())) {
@@ -169,6 +172,7 @@ HapticScene HapticScene::peg_in_hole(const PegInHoleOptions& o) {
   SceneObject table = SceneObject::box("table", Vec3(0.45, table_half_thickness, 0.30),
                                        Pose{Quat::Identity(), Vec3(0.1, o.table_height_m - table_half_thickness, -0.45)});
   table.rgba = {0.45f, 0.35f, 0.25f, 1.0f};
+  table.contact_top_plane = true;
   scene.objects.push_back(table);
 
   // The peg stands on its base: its axis (object z) along world +y.

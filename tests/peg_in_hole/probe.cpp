@@ -26,7 +26,9 @@ int main(int argc, char** argv) {
   if (getenv("THUMBROLL")) c.sim_user.thumb_pronation_deg = atof(getenv("THUMBROLL"));
   auto shape = simulated_participant_hand(c.sim_user);
   HandModel hand(*shape);
-  SimulatedUser user(c, hand, 7);
+  const std::uint64_t user_seed = getenv("USER_SEED") ? std::strtoull(getenv("USER_SEED"), nullptr, 10) : 7;
+  const std::uint64_t layout_seed = getenv("LAYOUT_SEED") ? std::strtoull(getenv("LAYOUT_SEED"), nullptr, 10) : 11;
+  SimulatedUser user(c, hand, user_seed);
   const double fam = getenv("FAM") ? atof(getenv("FAM")) : 20.0;
   for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
     if (fam <= 0) break;
@@ -34,7 +36,7 @@ int main(int argc, char** argv) {
     SimulatedTrialOptions fo;
     fo.phase = phase;
     fo.time_limit_s = fam;
-    auto r = run_simulated_trial(c, trial_layout(c, 11, -1), Setting{true, true}, user, hand, *dev, fo);
+    auto r = run_simulated_trial(c, trial_layout(c, layout_seed, -1), Setting{true, true}, user, hand, *dev, fo);
     user.set_grasp_only(false);
     std::printf("familiarisation %.0f s: %d breaks, felt gain %.2f\n", fam, r ? r->breaks : -1, user.felt_gain());
   }
@@ -42,7 +44,7 @@ int main(int argc, char** argv) {
     for (int k = 0; k < atoi(rep); ++k) {
       SimulatedTrialOptions to;
       to.time_limit_s = limit;
-      auto r = run_simulated_trial(c, trial_layout(c, 11, trial + k), setting_from_number(setting), user, hand, *dev, to);
+      auto r = run_simulated_trial(c, trial_layout(c, layout_seed, trial + k), setting_from_number(setting), user, hand, *dev, to);
       if (!r) return 1;
       std::printf("trial %d: %s %.1f s, %d breaks, %d regrasps; grip target %.2f, felt gain %.2f, feed-forward %.3f\n",
                   trial + k, r->completed ? "inserted" : "timed out", r->completion_time_s, r->breaks, r->regrasps,
@@ -50,9 +52,9 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  auto layout = trial_layout(c, 11, trial);
+  auto layout = trial_layout(c, layout_seed, trial);
   const bool spring = getenv("SPRING") != nullptr;
-  if (spring) layout = trial_layout(c, 11, -1);
+  if (spring) layout = trial_layout(c, layout_seed, -1);
   user.set_grasp_only(spring);
   auto w = PegWorld::create(c, layout, setting_from_number(setting), hand, *dev, spring ? WorldPhase::spring : WorldPhase::trial);
   if (!w) { std::printf("%s\n", w.error().message.c_str()); return 1; }
@@ -61,17 +63,8 @@ int main(int argc, char** argv) {
   user.begin(0, Pose{q, layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)});
   std::string last;
   for (int t = 0; t < limit * 1000; ++t) {
-    Percept p;
+    const Percept p = perceive(world);
     const auto& s = world.snapshot();
-    p.time_ns = world.now_ns(); p.T_world_peg = world.peg_pose(); p.peg_rgba = world.peg_rgba();
-    p.T_world_proxy_wrist = s.proxy.joint(HandJoint::wrist);
-    for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.proxy.joint(tip_of(static_cast<Finger>(f))).p;
-    p.hole = world.hole();
-    for (std::size_t ch = 0; ch < s.channel_count; ++ch) {
-      auto fi = static_cast<std::size_t>(s.channels[ch].finger);
-      p.felt_normal_n[fi] = std::max(0.0, s.channels[ch].measured.normal_n);
-      p.felt_shear_n[fi] = s.channels[ch].measured.shear_magnitude_n();
-    }
     auto cmd = user.act(p);
     world.submit_hand(cmd.T_world_wrist, cmd.angles);
     auto ev = world.step();

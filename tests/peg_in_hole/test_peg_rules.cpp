@@ -9,6 +9,7 @@
 #include "proprio/peg_in_hole/monitor.hpp"
 #include "proprio/peg_in_hole/protocol.hpp"
 #include "proprio/peg_in_hole/simulated_user.hpp"
+#include "proprio/peg_in_hole/study_runner.hpp"
 #include "proprio/peg_in_hole/world.hpp"
 #include "proprio/study/design.hpp"
 
@@ -202,7 +203,8 @@ TEST(PegProtocol, LayoutsAreSeededAndWithinTheirRanges) {
 
 namespace {
 
-HandModel user_hand() { return HandModel(*HandShape::from_measurements(0.19, 0.09)); }
+// The simulated participants' hand, as the study runner builds it.
+HandModel user_hand() { return HandModel(*simulated_participant_hand(PegInHoleConfig{}.sim_user)); }
 
 std::unique_ptr<PegWorld> make_world(Setting s) {
   PegInHoleConfig c;
@@ -252,17 +254,7 @@ TEST(PegConditions, WithoutHapticsTheDevicesGetZeroWhileContactsStay) {
     // Until a second after the hand first pressed on the peg (up to 10 s).
     int touched_at = -1;
     for (int i = 0; i < 10000 && (touched_at < 0 || i < touched_at + 1000); ++i) {
-      Percept p;
-      const auto& s = w->snapshot();
-      p.time_ns = w->now_ns();
-      p.T_world_peg = w->peg_pose();
-      p.peg_rgba = w->peg_rgba();
-      for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.proxy.joint(tip_of(static_cast<Finger>(f))).p;
-      p.hole = w->hole();
-      for (std::size_t ch = 0; ch < s.channel_count; ++ch) {
-        p.felt_normal_n[static_cast<std::size_t>(s.channels[ch].finger)] = std::max(0.0, s.channels[ch].measured.normal_n);
-      }
-      const HandCommand cmd = user.act(p);
+      const HandCommand cmd = user.act(perceive(*w));
       w->submit_hand(cmd.T_world_wrist, cmd.angles);
       w->step();
       max_contact = std::max(max_contact, grasp_force_n(w->snapshot().object_normal_n));

@@ -260,6 +260,48 @@ TEST(ContactSim, PegInHoleSceneIsStable) {
   EXPECT_TRUE(sim->place_object("peg", *start));
 }
 
+// A table top as a contact plane holds what stands on it where its box
+// would, and has no edges: a can beyond them stays at table height.
+TEST(ContactSim, ATableTopPlaneHoldsObjectsAsItsBoxDoesButHasNoEdges) {
+  const double top = 0.8;
+  for (const bool plane : {false, true}) {
+    SCOPED_TRACE(plane ? "plane" : "box");
+    HapticScene scene = empty_scene();
+    SceneObject table = SceneObject::box("table", Vec3(0.2, 0.02, 0.2), Pose{Quat::Identity(), Vec3(0, top - 0.02, 0)});
+    table.contact_top_plane = plane;
+    scene.objects.push_back(table);
+    const Quat q_upright(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX()));
+    for (const auto& [name, x] : {std::pair{"on", 0.0}, std::pair{"beyond", 0.35}}) {
+      SceneObject can = SceneObject::cylinder(name, 0.03, 0.05, Pose{q_upright, Vec3(x, top + 0.051, 0)});
+      can.fixed = false;
+      can.mass_kg = 0.3;
+      scene.objects.push_back(can);
+    }
+    auto mjcf = generate_mjcf(test_hand(), Handedness::right, scene, ContactSimOptions{});
+    ASSERT_TRUE(mjcf) << mjcf.error().message;
+    EXPECT_EQ(mjcf->find("name=\"table\"") != std::string::npos &&
+                  mjcf->find("type=\"plane\"") != std::string::npos,
+              plane);
+    auto sim = ContactSimulation::create(test_hand(), Handedness::right, scene);
+    ASSERT_TRUE(sim) << sim.error().message;
+    for (int i = 0; i < 1000; ++i) sim->step();
+    EXPECT_NEAR(sim->object_pose("on")->p.y(), top + 0.05, 0.002);
+    if (plane) {
+      EXPECT_NEAR(sim->object_pose("beyond")->p.y(), top + 0.05, 0.002);
+    } else {
+      EXPECT_LT(sim->object_pose("beyond")->p.y(), top - 0.5) << "falls past the box's edge";
+    }
+  }
+  SceneObject free_box = SceneObject::box("lid", Vec3(0.1, 0.01, 0.1), Pose{});
+  free_box.fixed = false;
+  free_box.contact_top_plane = true;
+  ASSERT_FALSE(free_box.validate());
+  EXPECT_NE(free_box.validate().error().message.find("lid"), std::string::npos);
+  SceneObject ball = SceneObject::sphere("ball", 0.1, Pose{});
+  ball.contact_top_plane = true;
+  EXPECT_FALSE(ball.validate());
+}
+
 // A peg a little narrower than the hole slides through it under gravity
 // (the hole's axis tilted down); one wider than the hole cannot enter.
 TEST(ContactSim, TightHoleAdmitsOnlyAPegThatFits) {

@@ -20,7 +20,15 @@ std::string simulated_participant_id(int index) { return fmt::format("sim{:02d}"
 
 namespace {
 
-Percept perceive(const PegWorld& w, const std::vector<Finger>& fingers) {
+Pose rest_wrist(const PegInHoleConfig& c, const TrialLayout& layout) {
+  // Hand resting in front of the body, to the right of and above the peg.
+  const Quat q(Eigen::AngleAxisd(-0.3, Vec3::UnitX()));
+  return Pose{q, layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)};
+}
+
+}  // namespace
+
+Percept perceive(const PegWorld& w) {
   Percept p;
   const haptics::ServoSnapshot& s = w.snapshot();
   p.time_ns = w.now_ns();
@@ -30,21 +38,13 @@ Percept perceive(const PegWorld& w, const std::vector<Finger>& fingers) {
   for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.proxy.joint(tip_of(static_cast<Finger>(f))).p;
   p.hole = w.hole();
   // Touch: what each device renders (its force sensors), nothing else.
-  for (std::size_t c = 0; c < s.channel_count && c < fingers.size(); ++c) {
+  for (std::size_t c = 0; c < s.channel_count; ++c) {
     const auto fi = static_cast<std::size_t>(s.channels[c].finger);
     p.felt_normal_n[fi] = std::max(0.0, s.channels[c].measured.normal_n);
     p.felt_shear_n[fi] = s.channels[c].measured.shear_magnitude_n();
   }
   return p;
 }
-
-Pose rest_wrist(const PegInHoleConfig& c, const TrialLayout& layout) {
-  // Hand resting in front of the body, to the right of and above the peg.
-  const Quat q(Eigen::AngleAxisd(-0.3, Vec3::UnitX()));
-  return Pose{q, layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)};
-}
-
-}  // namespace
 
 Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting,
                                         SimulatedUser& user, const HandModel& hand_model,
@@ -88,7 +88,7 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
   std::vector<float> tick_us;
   tick_us.reserve(static_cast<std::size_t>(std::min<std::int64_t>(limit_ticks, 200000)));
   for (std::int64_t tick = 0; tick < limit_ticks; ++tick) {
-    const HandCommand cmd = user.act(perceive(world, config.devices.fingers));
+    const HandCommand cmd = user.act(perceive(world));
     world.submit_hand(cmd.T_world_wrist, cmd.angles);
     const auto t0 = std::chrono::steady_clock::now();
     const PegEvent ev = world.step();

@@ -58,6 +58,10 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
   if (!device_model) return make_error(Errc::invalid_argument, "PegWorld needs a fingertip device model");
   std::unique_ptr<PegWorld> w(new PegWorld(config, layout, setting, phase));
   haptics::HapticScene scene = trial_scene(config, layout);
+  if (const haptics::SceneObject* table = scene.find("table")) {
+    w->p_table_in_world_ = table->T_world_object.p;
+    w->table_half_extents_m_ = table->half_extents_m;
+  }
   if (phase != WorldPhase::trial) {
     // Familiarisation has no hole to finish in.
     std::erase_if(scene.objects, [](const haptics::SceneObject& o) { return o.name == "hole_plate"; });
@@ -158,7 +162,9 @@ PegEvent PegWorld::step() {
     // plate), a bottle the experimenter stands up again. A free standing
     // bottle of this shape falls past 15 deg, so nothing rests in between.
     const double table = config_.layout.table_height_m;
-    const bool fell_off = peg_pose_.p.y() < table - 0.05;
+    const Vec3 p_peg_in_table = peg_pose_.p - p_table_in_world_;
+    const bool fell_off = peg_pose_.p.y() < table - 0.05 || std::abs(p_peg_in_table.x()) > table_half_extents_m_.x() ||
+                          std::abs(p_peg_in_table.z()) > table_half_extents_m_.z();
     const bool not_standing = std::abs(peg_axis(peg_pose_).y()) < 0.95;
     const bool untouched = force < 0.05;
     if (not_standing && untouched && !insertion_.inserted) {

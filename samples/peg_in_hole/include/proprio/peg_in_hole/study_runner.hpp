@@ -36,6 +36,10 @@ struct SimulatedTrialOptions {
   std::string recording_meta;        // JSON for the recording's event stream
 };
 
+// What a participant in `w` sees (the peg, its colour, the rendered hand,
+// the hole) and feels (each device's force sensors), this tick.
+Percept perceive(const PegWorld& w);
+
 // One trial (or familiarisation phase) of a simulated participant.
 Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const TrialLayout& layout, Setting setting,
                                         SimulatedUser& user, const HandModel& hand_model,

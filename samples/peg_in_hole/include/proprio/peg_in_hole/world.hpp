@@ -84,6 +84,9 @@ class PegWorld {
   BreakMonitor monitor_;
   TimeNs now_ns_ = 0, start_ns_ = 0, broken_at_ns_ = 0, idle_since_ns_ = -1;
   Pose peg_pose_;
+  // The table top's extent in x and z: its contact plane has no edges, so a
+  // peg pushed beyond them is taken as fallen off.
+  Vec3 p_table_in_world_ = Vec3::Zero(), table_half_extents_m_ = Vec3::Constant(1e9);
   InsertionState insertion_;
   bool inserted_ = false;
   int breaks_ = 0, drops_ = 0, respawns_ = 0;

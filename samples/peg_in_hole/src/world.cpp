@@ -162,11 +162,14 @@ PegEvent PegWorld::step() {
     // plate), a bottle the experimenter stands up again. A free standing
     // bottle of this shape falls past 15 deg, so nothing rests in between.
     const double table = config_.layout.table_height_m;
-    const Vec3 p_peg_in_table = peg_pose_.p - p_table_in_world_;
-    const bool fell_off = peg_pose_.p.y() < table - 0.05 || std::abs(p_peg_in_table.x()) > table_half_extents_m_.x() ||
-                          std::abs(p_peg_in_table.z()) > table_half_extents_m_.z();
     const bool not_standing = std::abs(peg_axis(peg_pose_).y()) < 0.95;
     const bool untouched = force < 0.05;
+    // Beyond the table's edges a held peg is fine; a let-go one would fall
+    // (the table's contact plane has no edges to fall from).
+    const Vec3 p_peg_in_table = peg_pose_.p - p_table_in_world_;
+    const bool beyond_edge = std::abs(p_peg_in_table.x()) > table_half_extents_m_.x() ||
+                             std::abs(p_peg_in_table.z()) > table_half_extents_m_.z();
+    const bool fell_off = peg_pose_.p.y() < table - 0.05 || (beyond_edge && untouched);
     if (not_standing && untouched && !insertion_.inserted) {
       if (idle_since_ns_ < 0) idle_since_ns_ = now_ns_;
     } else {

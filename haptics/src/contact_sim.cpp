@@ -142,6 +142,11 @@ struct Mjcf {
 // (contype 2) touch objects but not each other.
 constexpr const char* kObjectContact = R"( contype="1" conaffinity="3")";
 constexpr const char* kHandContact = R"( contype="2" conaffinity="1")";
+// A cylinder whose hand contacts go to its capsule (hand_touches_capsule):
+// the cylinder meets objects (bit 1) and other such cylinders (bit 4), never
+// the hand (bit 2); the capsule meets only the hand.
+constexpr const char* kObjectOnlyContact = R"( contype="4" conaffinity="5")";
+constexpr const char* kHandOnlyContact = R"( contype="0" conaffinity="2")";
 
 void half_cylinder_mesh(Mjcf& m, const SceneObject& o) {
   // The +y half of a cylinder along z: a convex solid, so MuJoCo's convex
@@ -187,6 +192,14 @@ void object_geoms(Mjcf& m, const SceneObject& o, const std::string& indent) {
     case ShapeKind::capsule:
       m.s << indent << "<geom type=\"" << (o.shape == ShapeKind::cylinder ? "cylinder" : "capsule") << "\" size=\""
           << o.radius_m << ' ' << o.half_length_m << '"';
+      if (o.hand_touches_capsule) {
+        m.s << " name=\"" << o.name << "\" friction=\"" << o.friction << " 0.005 0.0001\"" << kObjectOnlyContact;
+        m.rgba(o.rgba);
+        m.s << "/>\n" << indent << "<geom type=\"capsule\" size=\"" << o.radius_m << ' ' << o.half_length_m - o.radius_m
+            << "\" name=\"" << o.name << "_hand\" friction=\"" << o.friction << " 0.005 0.0001\"" << kHandOnlyContact
+            << " rgba=\"0 0 0 0\"/>\n";
+        break;
+      }
       common(o.name);
       m.s << "/>\n";
       break;

@@ -42,6 +42,9 @@ Status SceneObject::validate() const {
   if (contact_top_plane && (shape != ShapeKind::box || !fixed)) {
     return object_error(*this, "contact_top_plane is for fixed boxes only (a table top)");
   }
+  if (hand_touches_capsule && (shape != ShapeKind::cylinder || !(half_length_m > radius_m))) {
+    return object_error(*this, "hand_touches_capsule is for cylinders longer than their diameter");
+  }
   switch (shape) {
     case ShapeKind::box:
       if (!positive(half_extents_m.x()) || !positive(half_extents_m.y()) || !positive(half_extents_m.z())) {
@@ -182,6 +185,8 @@ HapticScene HapticScene::peg_in_hole(const PegInHoleOptions& o) {
   peg.fixed = false;
   peg.mass_kg = o.peg_mass_kg;
   peg.rgba = {0.95f, 0.95f, 0.95f, 1.0f};
+  // The fingers pinch its side, away from the ends (SceneObject).
+  peg.hand_touches_capsule = true;
   scene.objects.push_back(peg);
 
   // A vertical plate whose hole axis (object z) points along world +x, so the

@@ -302,6 +302,57 @@ TEST(ContactSim, ATableTopPlaneHoldsObjectsAsItsBoxDoesButHasNoEdges) {
   EXPECT_FALSE(ball.validate());
 }
 
+// A cylinder whose hand contacts go to a capsule: the palm holds it on the
+// capsule's side, which is the cylinder's side, while the table still meets
+// the flat base (a capsule tipped onto its dome would roll over). (A plain
+// cylinder lying on the palm is no reference: libccd gives a cylinder one
+// contact per geom pair, and it rolls off.)
+TEST(ContactSim, ACylinderTheHandTouchesAsACapsuleStillStandsOnItsBase) {
+  const HandModel model = test_hand();
+  const Pose T_world_wrist{Quat(Eigen::AngleAxisd(M_PI, Vec3::UnitZ())), Vec3(0, 1.0, -0.3)};  // palm up
+  const HandPose pose = model.forward(Handedness::right, HandAngles{}, T_world_wrist, 0);
+  const double palm_top = T_world_wrist.p.y() + 0.6 * model.shape().palm_radius_m;
+  const Vec3 p_palm = 0.5 * (T_world_wrist.p + pose.joint(HandJoint::middle_proximal).p);
+  const double radius = 0.015, mass = 0.05, table_top = 0.5;
+  HapticScene scene = empty_scene();
+  SceneObject table = SceneObject::box("table", Vec3(0.2, 0.02, 0.2), Pose{Quat::Identity(), Vec3(0, table_top - 0.02, 0)});
+  table.contact_top_plane = true;
+  scene.objects.push_back(table);
+  // Lying across the palm (axis along world x) ...
+  SceneObject lying = SceneObject::cylinder(
+      "lying", radius, 0.03,
+      Pose{Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY())), Vec3(p_palm.x(), palm_top + radius + 0.0005, p_palm.z())});
+  // ... and standing on the table, tipped 8 degrees onto its rim.
+  const Quat q_tipped =
+      Quat(Eigen::AngleAxisd(deg_to_rad(8.0), Vec3::UnitZ())) * Quat(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX()));
+  SceneObject standing = SceneObject::cylinder("standing", radius, 0.03, Pose{q_tipped, Vec3(0, table_top + 0.032, 0)});
+  for (SceneObject* o : {&lying, &standing}) {
+    o->fixed = false;
+    o->mass_kg = mass;
+    o->hand_touches_capsule = true;
+    scene.objects.push_back(*o);
+  }
+  auto sim = ContactSimulation::create(model, Handedness::right, scene);
+  ASSERT_TRUE(sim) << sim.error().message;
+  EXPECT_NE(sim->mjcf().find("name=\"lying_hand\""), std::string::npos);
+  sim->reset_hand(T_world_wrist, HandAngles{});
+  for (int i = 0; i < 1500; ++i) sim->step();
+  EXPECT_NEAR(sim->hand_force_on_object("lying").y(), mass * 9.81, 0.05 * mass * 9.81) << "the palm holds its weight";
+  EXPECT_NEAR(sim->object_pose("lying")->p.y(), palm_top + radius, 0.0015) << "on its side, the cylinder's radius";
+  EXPECT_EQ(sim->hand_force_on_object("standing"), Vec3::Zero()) << "the hand does not touch it";
+  const Vec3 axis = sim->object_pose("standing")->q * Vec3::UnitZ();
+  EXPECT_GT(axis.y(), std::cos(deg_to_rad(0.5))) << "settled back onto its flat base";
+  EXPECT_NEAR(sim->object_pose("standing")->p.y(), table_top + 0.03, 0.001);
+
+  SceneObject box = SceneObject::box("crate", Vec3(0.1, 0.1, 0.1), Pose{});
+  box.hand_touches_capsule = true;
+  ASSERT_FALSE(box.validate());
+  EXPECT_NE(box.validate().error().message.find("crate"), std::string::npos);
+  SceneObject puck = SceneObject::cylinder("puck", 0.03, 0.01, Pose{});
+  puck.hand_touches_capsule = true;
+  EXPECT_FALSE(puck.validate()) << "shorter than its diameter: the capsule would be a sphere";
+}
+
 // A peg a little narrower than the hole slides through it under gravity
 // (the hole's axis tilted down); one wider than the hole cannot enter.
 TEST(ContactSim, TightHoleAdmitsOnlyAPegThatFits) {

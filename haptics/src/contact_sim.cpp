@@ -220,15 +220,25 @@ void object_geoms(Mjcf& m, const SceneObject& o, const std::string& indent) {
       const double hz = o.half_extents_m.z();
       const double radial_half = 0.5 * (ring_out - r);
       const double tangential_half = ring_out * std::tan(a) + 0.001;
+      // A fixed plate's ring is a body of its own: MuJoCo 2.2.2 has no
+      // mid-phase, so every hand segment the broad phase finds near the
+      // plate's body is tested against each of its geoms. The slabs' body
+      // spans the plate, the ring's only the hole.
+      std::string ring_indent = indent;
+      if (o.fixed) {
+        m.s << indent << "<body name=\"" << o.name << "_ring\">\n";
+        ring_indent += "  ";
+      }
       for (int i = 0; i < n; ++i) {
         const double phi = 2.0 * a * i;
         const Vec3 centre((r + radial_half) * std::cos(phi), (r + radial_half) * std::sin(phi), 0.0);
         const Quat q(Eigen::AngleAxisd(phi, Vec3::UnitZ()));
-        m.s << indent << "<geom type=\"box\" size=\"" << radial_half << ' ' << tangential_half << ' ' << hz << '"';
+        m.s << ring_indent << "<geom type=\"box\" size=\"" << radial_half << ' ' << tangential_half << ' ' << hz << '"';
         m.pose_attrs({q, centre});
         common(o.name + "_ring" + std::to_string(i));
         m.s << "/>\n";
       }
+      if (o.fixed) m.s << indent << "</body>\n";
       const double X = o.half_extents_m.x(), Y = o.half_extents_m.y();
       const double S = slab_start;
       struct Slab { Vec3 centre, half; };
@@ -682,7 +692,11 @@ Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model,
     const int b = m->geom_bodyid[g];
     const bool is_hand = std::find(impl->hand_bodies.begin(), impl->hand_bodies.end(), b) != impl->hand_bodies.end();
     impl->geom_hand[static_cast<std::size_t>(g)] = is_hand;
-    if (!is_hand && b != 0) impl->object_body_of_geom[static_cast<std::size_t>(g)] = b;
+    if (is_hand || b == 0) continue;
+    // A geom of a nested body (a plate's ring) belongs to the scene object.
+    int top = b;
+    while (m->body_parentid[top] != 0) top = m->body_parentid[top];
+    impl->object_body_of_geom[static_cast<std::size_t>(g)] = top;
   }
   for (const SceneObject& o : scene.objects) {
     if (o.fixed) continue;

@@ -7,6 +7,10 @@
 // target; WRIST=1 the proxy wrist against the submitted one; THUMBROLL=deg
 // the thumb's pronation; FAM=s spring familiarisation first (20); SPRING=1
 // the trial itself on the spring; REPEAT=N N trials in a row by one user. "RELEASE why" lines say why the user let go.
+// PSEED=<participant_seed from a study JSON> SETTINGS=1,4,2,...: that study
+// participant again, exactly (its 180 + 180 s familiarisation unless FAM is
+// set, then its trials in order);
+// TRACE=k traces its k-th trial (EVERY=N adds forces and the peg every N ms).
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -39,6 +43,68 @@ int main(int argc, char** argv) {
     auto r = run_simulated_trial(c, trial_layout(c, layout_seed, -1), Setting{true, true}, user, hand, *dev, fo);
     user.set_grasp_only(false);
     std::printf("familiarisation %.0f s: %d breaks, felt gain %.2f\n", fam, r ? r->breaks : -1, user.felt_gain());
+  }
+  if (const char* ps = getenv("PSEED")) {
+    // PSEED=<participant_seed from a study's JSON sidecar> SETTINGS=1,4,2,...:
+    // that participant again (published familiarisation unless FAM is set),
+    // its trials in order, with why the hand let go in trial TRACE (1-based).
+    const std::uint64_t pseed = std::strtoull(ps, nullptr, 10);
+    SimulatedUser pu(c, hand, mix_seed(pseed, 0x55534552));
+    const double fam_s = getenv("FAM") ? atof(getenv("FAM")) : 180.0;
+    for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
+      pu.set_grasp_only(phase == WorldPhase::spring);
+      SimulatedTrialOptions fo;
+      fo.phase = phase;
+      fo.time_limit_s = fam_s;
+      (void)run_simulated_trial(c, trial_layout(c, pseed, -1), Setting{true, true}, pu, hand, *dev, fo);
+      pu.set_grasp_only(false);
+    }
+    const int trace = getenv("TRACE") ? atoi(getenv("TRACE")) : 0;
+    int k = 0;
+    for (const char* q = getenv("SETTINGS"); q && *q; ++k) {
+      const int setting_k = atoi(q);
+      while (*q && *q != ',') ++q;
+      if (*q == ',') ++q;
+      if (k + 1 == trace) {
+        auto tw = PegWorld::create(c, trial_layout(c, pseed, k), setting_from_number(setting_k), hand, *dev);
+        if (!tw) return 1;
+        PegWorld& w2 = **tw;
+        const auto& L = trial_layout(c, pseed, k);
+        pu.begin(0, Pose{Quat(Eigen::AngleAxisd(-0.3, Vec3::UnitX())), L.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)});
+        std::string last_phase;
+        for (int t = 0; t < 120000; ++t) {
+          const Percept pp = perceive(w2);
+          const HandCommand cmd = pu.act(pp);
+          w2.submit_hand(cmd.T_world_wrist, cmd.angles);
+          const PegEvent ev = w2.step();
+          const std::string ph(pu.phase_name());
+          if (ph != last_phase) {
+            std::printf("%7.3f %-8s s=%.3f ff=%.3f%s%s\n", 1e-9 * w2.now_ns(), ph.c_str(), pu.closure(), pu.feedforward_closure(),
+                        ph == "release" ? " why " : "", ph == "release" ? std::string(pu.release_reason()).c_str() : "");
+            last_phase = ph;
+          }
+          if (ev.kind != PegEvent::Kind::none) std::printf("%7.3f EVENT %d\n", 1e-9 * w2.now_ns(), static_cast<int>(ev.kind));
+          if (getenv("EVERY") && t % atoi(getenv("EVERY")) == 0) {
+            const auto& sn = w2.snapshot();
+            const Vec3 ax = peg_axis(w2.peg_pose());
+            std::printf("        %-7s s=%.3f grip %.2f tips T%.2f I%.2f M%.2f ax(%.2f %.2f %.2f) peg(%.3f %.3f %.3f)\n", ph.c_str(),
+                        pu.closure(), w2.filtered_grasp_force_n(), sn.contact[0].normal_n, sn.contact[1].normal_n,
+                        sn.contact[2].normal_n, ax.x(), ax.y(), ax.z(), w2.peg_pose().p.x(), w2.peg_pose().p.y(),
+                        w2.peg_pose().p.z());
+          }
+          if (ev.kind == PegEvent::Kind::inserted) break;
+        }
+        return 0;
+      }
+      SimulatedTrialOptions to;
+      to.time_limit_s = 120;
+      auto r = run_simulated_trial(c, trial_layout(c, pseed, k), setting_from_number(setting_k), pu, hand, *dev, to);
+      if (!r) return 1;
+      std::printf("trial %d (setting %d): %s %.1f s, %d breaks, %d drops; grip target %.2f, felt gain %.2f, feed-forward %.3f\n",
+                  k + 1, setting_k, r->completed ? "inserted" : "timed out", r->completion_time_s, r->breaks, r->drops,
+                  pu.grip_target_n(), pu.felt_gain(), pu.feedforward_closure());
+    }
+    return 0;
   }
   if (const char* rep = getenv("REPEAT")) {  // REPEAT=N: N trials in a row, one participant
     for (int k = 0; k < atoi(rep); ++k) {

@@ -86,26 +86,28 @@ TEST(PegStudy, ASigkilledStudyResumesWithNoTrialLostOrRepeated) {
   fs::remove_all(dir);
 }
 
-// The acceptance test of the simulated user: over several study seeds the
-// normalised completion time of setting 1 (wHF+wAA) is the lowest and that of
-// setting 4 (woHF+woAA) the highest.
+// The acceptance test of the simulated user: with the published protocol
+// (3 + 3 min familiarisation, 20 trials, 120 s timeout, 10 participants) and
+// its documented parameters, every study seed ranks the settings as the
+// thesis found: setting 1 (haptics + AA) fastest, setting 4 (neither) slowest.
 //
-// DISABLED: the scripted pinch holds and inserts the peg in too few trials
-// (it breaks the peg while lifting with haptics and lets it slip without),
-// so the settings do not separate: 2-participant study 1.05, 0.87, 1.05,
-// 1.04, GG p = 0.54. Run it with --gtest_also_run_disabled_tests once the
-// grasp is reliable (docs/peg-in-hole.md, "State of the simulated user").
+// DISABLED: not yet true for every seed, and each seed is a whole study
+// (7-9 min on 2 cores), beyond the CI suite's budget. Two runs of seed 1 with
+// today's model gave 0.69, 0.79, 1.22, 1.31 and 0.79, 0.77, 1.12, 1.32
+// (setting 4 slowest in both, but 1 and 2 level in the second), the second
+// after a change that only reordered MuJoCo's contacts: the simulation is
+// chaotic, and AA's benefit is smaller than the spread between runs
+// (docs/peg-in-hole.md, state items 12-14). Run it with
+//   peg_in_hole_study_tests --gtest_also_run_disabled_tests --gtest_filter='*Rank*'
 TEST(PegStudy, DISABLED_SimulatedUsersRankTheSettingsAsTheThesis) {
-  PegInHoleConfig c;
-  c.familiarisation.spring_phase_s = 5;
-  c.familiarisation.ground_phase_s = 5;
-  c.main_task.trial_timeout_s = 60;
-  c.recording.enabled = false;
-  for (std::uint64_t seed : {1u, 2u, 3u}) {
+  PegInHoleConfig c;            // the published protocol
+  c.recording.enabled = false;  // the only departure: no recordings to write
+  for (const std::uint64_t seed : {1u, 2u, 3u}) {
+    SCOPED_TRACE(fmt::format("study seed {}", seed));
     const fs::path dir = fresh_dir(fmt::format("peg_order_{}", seed));
     SimulatedStudyOptions o;
     o.out_dir = dir;
-    o.participants = 4;
+    o.participants = 10;
     o.seed = seed;
     o.threads = 2;
     auto r = run_simulated_study(c, o);
@@ -114,13 +116,10 @@ TEST(PegStudy, DISABLED_SimulatedUsersRankTheSettingsAsTheThesis) {
     ASSERT_TRUE(a) << a.error().message;
     ASSERT_EQ(a->summary.size(), 4u);
     std::string line;
-    for (const auto& s : a->summary) line += fmt::format(" {}:{:.3f}", s.setting, s.mean);
-    for (std::size_t k = 1; k < 4; ++k) {
-      EXPECT_LT(a->summary[0].mean, a->summary[k].mean) << "seed " << seed << ":" << line;
-    }
-    for (std::size_t k = 0; k < 3; ++k) {
-      EXPECT_GT(a->summary[3].mean, a->summary[k].mean) << "seed " << seed << ":" << line;
-    }
+    for (const auto& s : a->summary) line += fmt::format("  setting {}: {:.3f} +- {:.3f}", s.setting, s.mean, s.sd);
+    std::printf("seed %llu (%.0f s wall):%s\n", static_cast<unsigned long long>(seed), r->wall_s, line.c_str());
+    for (std::size_t k = 1; k < 4; ++k) EXPECT_LT(a->summary[0].mean, a->summary[k].mean) << line;
+    for (std::size_t k = 0; k < 3; ++k) EXPECT_GT(a->summary[3].mean, a->summary[k].mean) << line;
     fs::remove_all(dir);
   }
 }

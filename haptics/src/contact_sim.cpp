@@ -165,8 +165,8 @@ void half_cylinder_mesh(Mjcf& m, const SceneObject& o) {
 }
 
 void object_geoms(Mjcf& m, const SceneObject& o, const std::string& indent) {
-  const auto common = [&](const std::string& geom_name) {
-    m.s << " name=\"" << geom_name << "\" friction=\"" << o.friction << " 0.005 0.0001\"" << kObjectContact;
+  const auto common = [&](const std::string& geom_name, const char* contact = kObjectContact) {
+    m.s << " name=\"" << geom_name << "\" friction=\"" << o.friction << " 0.005 0.0001\"" << contact;
     m.rgba(o.rgba);
   };
   switch (o.shape) {
@@ -193,11 +193,10 @@ void object_geoms(Mjcf& m, const SceneObject& o, const std::string& indent) {
       m.s << indent << "<geom type=\"" << (o.shape == ShapeKind::cylinder ? "cylinder" : "capsule") << "\" size=\""
           << o.radius_m << ' ' << o.half_length_m << '"';
       if (o.hand_touches_capsule) {
-        m.s << " name=\"" << o.name << "\" friction=\"" << o.friction << " 0.005 0.0001\"" << kObjectOnlyContact;
-        m.rgba(o.rgba);
-        m.s << "/>\n" << indent << "<geom type=\"capsule\" size=\"" << o.radius_m << ' ' << o.half_length_m - o.radius_m
-            << "\" name=\"" << o.name << "_hand\" friction=\"" << o.friction << " 0.005 0.0001\"" << kHandOnlyContact
-            << " rgba=\"0 0 0 0\"/>\n";
+        common(o.name, kObjectOnlyContact);
+        m.s << "/>\n" << indent << "<geom type=\"capsule\" size=\"" << o.radius_m << ' ' << o.half_length_m - o.radius_m << '"';
+        common(o.name + "_hand", kHandOnlyContact);
+        m.s << "/>\n";
         break;
       }
       common(o.name);

@@ -14,9 +14,41 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
+#include <string>
+#include <vector>
 #include "proprio/peg_in_hole/study_runner.hpp"
 using namespace proprio;
 using namespace proprio::peg_in_hole;
+
+// A trial like run_simulated_trial, tallying breaks and drops by the user's
+// phase when they happened ("b:lift", "d:align", ...).
+static TrialResult tallied_trial(const PegInHoleConfig& c, const TrialLayout& layout, Setting setting, SimulatedUser& u,
+                                 const HandModel& hand, std::shared_ptr<const haptics::FingertipDeviceModel> dev,
+                                 std::map<std::string, int>& tally) {
+  TrialResult r;
+  auto w = PegWorld::create(c, layout, setting, hand, std::move(dev));
+  if (!w) return r;
+  PegWorld& world = **w;
+  u.begin(world.now_ns(), Pose{Quat(Eigen::AngleAxisd(-0.3, Vec3::UnitX())),
+                               layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)});
+  for (int t = 0; t < 120000; ++t) {
+    const HandCommand cmd = u.act(perceive(world));
+    world.submit_hand(cmd.T_world_wrist, cmd.angles);
+    const std::string ph(u.phase_name());
+    const PegEvent ev = world.step();
+    if (ev.kind == PegEvent::Kind::broke) ++tally["b:" + ph];
+    if (ev.kind == PegEvent::Kind::dropped) ++tally["d:" + ph];
+    if (ev.kind == PegEvent::Kind::inserted) {
+      r.completed = true;
+      break;
+    }
+  }
+  r.completion_time_s = world.elapsed_s();
+  r.breaks = world.breaks();
+  r.drops = world.drops();
+  return r;
+}
 int main(int argc, char** argv) {
   const int setting = argc > 1 ? std::atoi(argv[1]) : 1;
   const int trial = argc > 2 ? std::atoi(argv[2]) : 0;
@@ -106,6 +138,70 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
+  if (const char* pn = getenv("PAIRED")) {
+    // PAIRED=N TRIALS=T SETS=1,2,3,4 PBASE=b: N participants (seeds b..b+N-1),
+    // each familiarised once, then T trials in every setting, each setting
+    // from a copy of the same familiarised user on the same layouts, so the
+    // settings differ only by the setting.
+    const int n = atoi(pn), trials = getenv("TRIALS") ? atoi(getenv("TRIALS")) : 5;
+    const std::uint64_t base = getenv("PBASE") ? std::strtoull(getenv("PBASE"), nullptr, 10) : 100;
+    std::vector<int> sets;
+    for (const char* q = getenv("SETS") ? getenv("SETS") : "1,2,3,4"; *q;) {
+      sets.push_back(atoi(q));
+      while (*q && *q != ',') ++q;
+      if (*q == ',') ++q;
+    }
+    std::vector<double> sum_t(5, 0.0), sum_norm(5, 0.0);
+    std::vector<int> sum_d(5, 0), sum_b(5, 0), sum_to(5, 0);
+    std::vector<std::map<std::string, int>> tally(5);
+    const double fam_s = getenv("FAM") ? atof(getenv("FAM")) : 180.0;
+    for (int i = 0; i < n; ++i) {
+      const std::uint64_t pseed = base + static_cast<std::uint64_t>(i);
+      SimulatedUser pu(c, hand, mix_seed(pseed, 0x55534552));
+      for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
+        pu.set_grasp_only(phase == WorldPhase::spring);
+        SimulatedTrialOptions fo;
+        fo.phase = phase;
+        fo.time_limit_s = fam_s;
+        (void)run_simulated_trial(c, trial_layout(c, pseed, -1), Setting{true, true}, pu, hand, *dev, fo);
+        pu.set_grasp_only(false);
+      }
+      std::vector<double> mean_t(5, 0.0);
+      for (int st : sets) {
+        SimulatedUser u = pu;
+        std::printf("p%llu S%d:", static_cast<unsigned long long>(pseed), st);
+        for (int k = 0; k < trials; ++k) {
+          SimulatedTrialOptions to;
+          to.time_limit_s = 120;
+          auto r = getenv("WHY") ? Result<TrialResult>(tallied_trial(c, trial_layout(c, pseed, k), setting_from_number(st),
+                                                                    u, hand, *dev, tally[st]))
+                                 : run_simulated_trial(c, trial_layout(c, pseed, k), setting_from_number(st), u, hand, *dev, to);
+          if (!r) return 1;
+          std::printf(" %5.1f/%db%dd", r->completion_time_s, r->breaks, r->drops);
+          mean_t[st] += r->completion_time_s / trials;
+          sum_d[st] += r->drops;
+          sum_b[st] += r->breaks;
+          sum_to[st] += r->completed ? 0 : 1;
+        }
+        std::printf("  mean %.1f\n", mean_t[st]);
+        std::fflush(stdout);
+      }
+      double all = 0.0;
+      for (int st : sets) all += mean_t[st] / static_cast<double>(sets.size());
+      for (int st : sets) {
+        sum_t[st] += mean_t[st] / n;
+        sum_norm[st] += mean_t[st] / all / n;
+      }
+    }
+    for (int st : sets)
+    {
+      std::printf("S%d: mean %.1f s, normalised %.2f, breaks %d, drops %d, timeouts %d", st, sum_t[st], sum_norm[st],
+                  sum_b[st], sum_d[st], sum_to[st]);
+      for (const auto& [k, v] : tally[st]) std::printf(" %s=%d", k.c_str(), v);
+      std::printf("\n");
+    }
+    return 0;
+  }
   if (const char* rep = getenv("REPEAT")) {  // REPEAT=N: N trials in a row, one participant
     for (int k = 0; k < atoi(rep); ++k) {
       SimulatedTrialOptions to;
@@ -161,7 +257,7 @@ int main(int argc, char** argv) {
       }
       if (getenv("TIPS")) for (int f = 0; f < 3; ++f) {
         Vec3 d = p.p_proxy_tip_in_world[f] - pp.p; Vec3 dr = d - d.dot(ax) * ax;
-        std::printf("      tip%d rel(%.3f %.3f %.3f) radial %.4f\n", f, d.x(), d.y(), d.z(), dr.norm());
+        std::printf("      tip%d rel(%.3f %.3f %.3f) radial %.4f axial %.4f\n", f, d.x(), d.y(), d.z(), dr.norm(), d.dot(ax));
       }
     }
     if (ev.kind == PegEvent::Kind::inserted) { std::printf("INSERTED at %.2f s\n", world.elapsed_s()); break; }

@@ -79,10 +79,18 @@ HandAngles SimulatedUser::posture(double s) const {
   // The fingers curl to a pinch shape by s = 1; past that only the MCP
   // flexes, so squeezing presses the pads into the peg instead of rolling
   // them off it onto the middle phalanges (which the devices cannot render).
-  const double curl = std::min(s, 1.0);
-  for (HandDof d : {HandDof::index_mcp_flexion, HandDof::middle_mcp_flexion}) set(d, 10 + 40 * s);
-  for (HandDof d : {HandDof::index_pip_flexion, HandDof::middle_pip_flexion}) set(d, 15 + 25 * curl);
-  for (HandDof d : {HandDof::index_dip_flexion, HandDof::middle_dip_flexion}) set(d, 5 + 10 * curl);
+  // Each finger is aimed at its own contact (finger_closure_offset_): the
+  // spread fingers reach the peg at different closures.
+  const auto finger = [&](HandDof mcp, HandDof pip, HandDof dip, double s_finger) {
+    const double curl = std::clamp(s_finger, 0.0, 1.0);
+    set(mcp, 10 + 40 * s_finger);
+    set(pip, 15 + 25 * curl);
+    set(dip, 5 + 10 * curl);
+  };
+  finger(HandDof::index_mcp_flexion, HandDof::index_pip_flexion, HandDof::index_dip_flexion,
+         s + finger_closure_offset_[0]);
+  finger(HandDof::middle_mcp_flexion, HandDof::middle_pip_flexion, HandDof::middle_dip_flexion,
+         s + finger_closure_offset_[1]);
   // Ring and little stay curled out of the way.
   for (HandDof d : {HandDof::ring_mcp_flexion, HandDof::little_mcp_flexion}) set(d, 70);
   for (HandDof d : {HandDof::ring_pip_flexion, HandDof::little_pip_flexion}) set(d, 90);
@@ -185,6 +193,7 @@ void SimulatedUser::plan_grasp(const Pose& T_world_peg_seen) {
   const HandShape& shape = hand_.shape();
   const double r_thumb = shape.fingers[0].joint_radius_m[3];
   const double r_index = shape.fingers[1].joint_radius_m[4];
+  finger_closure_offset_ = {0.0, 0.0};
   const auto tips = [&](double s) {
     const auto j = hand_.joint_poses_in_wrist(Handedness::right, posture(s));
     const Vec3 t = j[index_of(HandJoint::thumb_tip)].p;
@@ -252,6 +261,22 @@ void SimulatedUser::plan_grasp(const Pose& T_world_peg_seen) {
     if (std::abs(angle) < 0.01) break;
     const Quat turn(Eigen::AngleAxisd(-angle, axis));
     T_grasp_ = rotate_about(T_grasp_, turn, p_thumb_target);
+  }
+  // Preshape: each finger aimed to meet the peg at s_contact_ (people shape
+  // a tripod grasp so that both fingers land, Santello et al. 1998). The
+  // plan is for the user's own hand, spread as planned; without AA the
+  // proxy's fingers are not where this plan puts them.
+  for (std::size_t k = 0; k < 2; ++k) {
+    const HandJoint tip = k == 0 ? HandJoint::index_tip : HandJoint::middle_tip;
+    const double r_tip = shape.fingers[k + 1].joint_radius_m[4];
+    for (double sc = 0.0; sc <= kMaxClosure; sc += 0.01) {
+      const auto j = hand_.joint_poses_in_wrist(Handedness::right, posture(sc));
+      const Vec3 d = T_grasp_ * j[index_of(tip)].p - p_grasp_in_world_;
+      if ((d - d.dot(axis) * axis).norm() <= R + r_tip) {
+        finger_closure_offset_[k] = std::clamp(sc - s_contact_, -0.5, 0.5);
+        break;
+      }
+    }
   }
   s_open_ = std::max(0.0, s_contact_ - 0.8);
   T_standoff_ = T_grasp_;

@@ -107,6 +107,9 @@ class SimulatedUser {
 
   // Plan.
   double s_contact_ = 1.0, s_open_ = 0.2, s_ = 0.2;
+  // Closure added to s_ for index and middle: each finger aimed at its own
+  // contact (plan_grasp).
+  std::array<double, 2> finger_closure_offset_{};
   Pose T_grasp_, T_standoff_, T_pre_, T_rest_;
   Vec3 p_grasp_in_world_ = Vec3::Zero();
   // The guarded move: along the pinch axis until the thumb touches; the hand

@@ -148,6 +148,12 @@ TEST(PegConfig, TomlOverridesAndClearErrors) {
   EXPECT_TRUE(contact_sim_options(*torsion).torsional_friction);
   EXPECT_NE(torsion->describe().find("torsional friction on"), std::string::npos) << torsion->describe();
   EXPECT_FALSE(PegInHoleConfig::parse("[devices]\ntorsional_friction = 1.5\n"));
+  EXPECT_EQ(c->devices.emulator_substeps, 4);
+  auto fine = PegInHoleConfig::parse("[devices]\nemulator_substeps = 20\n");
+  ASSERT_TRUE(fine) << fine.error().message;
+  EXPECT_EQ(fine->devices.emulator_substeps, 20);
+  EXPECT_NE(fine->describe().find("20 emulated device substeps"), std::string::npos) << fine->describe();
+  EXPECT_FALSE(PegInHoleConfig::parse("[devices]\nemulator_substeps = 0\n"));
   auto unknown = PegInHoleConfig::parse("[peg]\nradius = 0.02\n", "t.toml");
   ASSERT_FALSE(unknown);
   EXPECT_NE(unknown.error().message.find("radius_m"), std::string::npos) << unknown.error().message;

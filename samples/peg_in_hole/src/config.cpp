@@ -99,6 +99,9 @@ Status PegInHoleConfig::validate() const {
     return bad("familiarisation phase durations must be >= 0");
   }
   if (devices.fingers.empty() || devices.fingers.size() > kFingerCount) return bad("devices.fingers: 1 to 5 fingers");
+  if (devices.emulator_substeps < 1 || devices.emulator_substeps > 1000) {
+    return bad("devices.emulator_substeps must be in [1, 1000]");
+  }
   if (!positive(recording.rate_hz) || recording.rate_hz > 1000.0) return bad("recording.rate_hz must be in (0, 1000]");
   if (!positive(sim_user.reach_speed_mps) || !positive(sim_user.insert_speed_mps) || !positive(sim_user.closing_speed) ||
       !positive(sim_user.guarded_speed_mps)) {
@@ -112,12 +115,12 @@ std::string PegInHoleConfig::describe() const {
   return fmt::format(
       "peg r={:.2f} mm, h={:.1f} mm, {:.0f} g, breaks at {:.2f} N (filter {:.0f} ms); hole clearance {:.2f} mm; "
       "{} x 4 trials ({} familiarisation), timeout {:.0f} s; familiarisation {:.0f} + {:.0f} s; finger coupling "
-      "{:.2f} N m/rad, device force scale {:.2f}, contact solver tolerance {:.0e}, torsional friction {}",
+      "{:.2f} N m/rad, device force scale {:.2f}, contact solver tolerance {:.0e}, torsional friction {}, {} emulated device substeps",
       1e3 * peg.radius_m, 1e3 * peg.length_m, 1e3 * peg.mass_kg, peg.break_force_n,
       1e3 * peg.break_filter_time_constant_s, 1e3 * hole.clearance_m, main_task.repetitions,
       main_task.familiarisation_trials, main_task.trial_timeout_s, familiarisation.spring_phase_s,
       familiarisation.ground_phase_s, devices.finger_joint_stiffness_nm_per_rad, devices.force_scale,
-      devices.solver_tolerance, devices.torsional_friction ? "on" : "off");
+      devices.solver_tolerance, devices.torsional_friction ? "on" : "off", devices.emulator_substeps);
 }
 
 Result<PegInHoleConfig> PegInHoleConfig::load_file(const std::filesystem::path& path) {
@@ -220,11 +223,14 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
     PEG_TRY(t, sub("devices"));
     if (t) {
       PEG_CHECK(t->check_keys("devices", {"fingers", "model", "finger_joint_stiffness_nm_per_rad", "force_scale",
-                                              "solver_tolerance", "torsional_friction"}));
+                                              "solver_tolerance", "torsional_friction",
+                                              "emulator_substeps"}));
       PEG_CHECK(read_double(*t, "finger_joint_stiffness_nm_per_rad", out.devices.finger_joint_stiffness_nm_per_rad,
                             0.05, 20.0));
       PEG_CHECK(read_double(*t, "force_scale", out.devices.force_scale, 0.01, 10.0));
       PEG_CHECK(read_double(*t, "solver_tolerance", out.devices.solver_tolerance, 1e-12, 1e-3));
+      PEG_TRY(substeps, t->get_int_or("emulator_substeps", out.devices.emulator_substeps, 1, 1000));
+      out.devices.emulator_substeps = static_cast<int>(substeps);
       PEG_TRY(torsion, t->get_bool_or("torsional_friction", out.devices.torsional_friction));
       out.devices.torsional_friction = torsion;
       if (t->contains("fingers")) {

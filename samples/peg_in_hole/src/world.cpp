@@ -83,7 +83,9 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
   }
   std::vector<haptics::ServoChannel> channels;
   for (Finger f : config.devices.fingers) {
-    auto dev = haptics::EmulatedFingertip::create(device_model);
+    devices::FingertipEmulatorOptions eo = haptics::emulator_options_for(*device_model);
+    eo.physics_substeps = static_cast<std::uint32_t>(config.devices.emulator_substeps);
+    auto dev = haptics::EmulatedFingertip::create(device_model, eo);
     if (!dev) return dev.error().with_context("emulated fingertip device");
     channels.push_back({f, device_model, std::shared_ptr<haptics::FingertipSink>(std::move(*dev))});
   }

@@ -93,6 +93,12 @@ struct DeviceOptions {
   // hold it better, as in a real pinch; docs/peg-in-hole.md (item 12) has
   // what two runs measured.
   bool torsional_friction = false;
+  // Physics substeps per 1 ms control period of each emulated device's motors
+  // (devices::FingertipEmulatorOptions::physics_substeps, 20 by default). 4
+  // (250 µs) still resolves the motors' ~2.5 ms electromechanical time
+  // constant, and a simulated study spends 6% fewer instructions (callgrind).
+  // Real devices ignore it.
+  int emulator_substeps = 4;
 };
 
 struct RecordingOptions {

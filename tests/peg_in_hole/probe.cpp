@@ -11,6 +11,9 @@
 // participant again, exactly (its 180 + 180 s familiarisation unless FAM is
 // set, then its trials in order);
 // TRACE=k traces its k-th trial (EVERY=N adds forces and the peg every N ms).
+// PAIRED=N TRIALS=T SETS=1,2,3,4 PBASE=b: N participants, each familiarised
+// once, then T trials in each setting from a copy of that participant (the
+// settings differ by nothing else); WHY=1 counts breaks and drops by phase.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -20,6 +23,36 @@
 #include "proprio/peg_in_hole/study_runner.hpp"
 using namespace proprio;
 using namespace proprio::peg_in_hole;
+
+// A study participant as the study runner makes one, familiarised as
+// published (180 + 180 s) unless FAM is set.
+static SimulatedUser familiarised_participant(const PegInHoleConfig& c, const HandModel& hand,
+                                              const std::shared_ptr<const haptics::FingertipDeviceModel>& dev,
+                                              std::uint64_t pseed) {
+  SimulatedUser pu(c, hand, mix_seed(pseed, 0x55534552));
+  const double fam_s = getenv("FAM") ? atof(getenv("FAM")) : 180.0;
+  for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
+    pu.set_grasp_only(phase == WorldPhase::spring);
+    SimulatedTrialOptions fo;
+    fo.phase = phase;
+    fo.time_limit_s = fam_s;
+    (void)run_simulated_trial(c, trial_layout(c, pseed, -1), Setting{true, true}, pu, hand, dev, fo);
+    pu.set_grasp_only(false);
+  }
+  return pu;
+}
+
+// "1,4,2" -> {1, 4, 2}, settings outside 1-4 dropped.
+static std::vector<int> settings_list(const char* text) {
+  std::vector<int> out;
+  for (const char* q = text; q && *q;) {
+    const int k = atoi(q);
+    if (k >= 1 && k <= 4) out.push_back(k);
+    while (*q && *q != ',') ++q;
+    if (*q == ',') ++q;
+  }
+  return out;
+}
 
 // A trial like run_simulated_trial, tallying breaks and drops by the user's
 // phase when they happened ("b:lift", "d:align", ...).
@@ -81,22 +114,11 @@ int main(int argc, char** argv) {
     // that participant again (published familiarisation unless FAM is set),
     // its trials in order, with why the hand let go in trial TRACE (1-based).
     const std::uint64_t pseed = std::strtoull(ps, nullptr, 10);
-    SimulatedUser pu(c, hand, mix_seed(pseed, 0x55534552));
-    const double fam_s = getenv("FAM") ? atof(getenv("FAM")) : 180.0;
-    for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
-      pu.set_grasp_only(phase == WorldPhase::spring);
-      SimulatedTrialOptions fo;
-      fo.phase = phase;
-      fo.time_limit_s = fam_s;
-      (void)run_simulated_trial(c, trial_layout(c, pseed, -1), Setting{true, true}, pu, hand, *dev, fo);
-      pu.set_grasp_only(false);
-    }
+    SimulatedUser pu = familiarised_participant(c, hand, *dev, pseed);
     const int trace = getenv("TRACE") ? atoi(getenv("TRACE")) : 0;
-    int k = 0;
-    for (const char* q = getenv("SETTINGS"); q && *q; ++k) {
-      const int setting_k = atoi(q);
-      while (*q && *q != ',') ++q;
-      if (*q == ',') ++q;
+    int k = -1;
+    for (const int setting_k : settings_list(getenv("SETTINGS"))) {
+      ++k;
       if (k + 1 == trace) {
         auto tw = PegWorld::create(c, trial_layout(c, pseed, k), setting_from_number(setting_k), hand, *dev);
         if (!tw) return 1;
@@ -145,27 +167,13 @@ int main(int argc, char** argv) {
     // settings differ only by the setting.
     const int n = atoi(pn), trials = getenv("TRIALS") ? atoi(getenv("TRIALS")) : 5;
     const std::uint64_t base = getenv("PBASE") ? std::strtoull(getenv("PBASE"), nullptr, 10) : 100;
-    std::vector<int> sets;
-    for (const char* q = getenv("SETS") ? getenv("SETS") : "1,2,3,4"; *q;) {
-      sets.push_back(atoi(q));
-      while (*q && *q != ',') ++q;
-      if (*q == ',') ++q;
-    }
+    const std::vector<int> sets = settings_list(getenv("SETS") ? getenv("SETS") : "1,2,3,4");
     std::vector<double> sum_t(5, 0.0), sum_norm(5, 0.0);
     std::vector<int> sum_d(5, 0), sum_b(5, 0), sum_to(5, 0);
     std::vector<std::map<std::string, int>> tally(5);
-    const double fam_s = getenv("FAM") ? atof(getenv("FAM")) : 180.0;
     for (int i = 0; i < n; ++i) {
       const std::uint64_t pseed = base + static_cast<std::uint64_t>(i);
-      SimulatedUser pu(c, hand, mix_seed(pseed, 0x55534552));
-      for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
-        pu.set_grasp_only(phase == WorldPhase::spring);
-        SimulatedTrialOptions fo;
-        fo.phase = phase;
-        fo.time_limit_s = fam_s;
-        (void)run_simulated_trial(c, trial_layout(c, pseed, -1), Setting{true, true}, pu, hand, *dev, fo);
-        pu.set_grasp_only(false);
-      }
+      const SimulatedUser pu = familiarised_participant(c, hand, *dev, pseed);
       std::vector<double> mean_t(5, 0.0);
       for (int st : sets) {
         SimulatedUser u = pu;

@@ -54,34 +54,6 @@ static std::vector<int> settings_list(const char* text) {
   return out;
 }
 
-// A trial like run_simulated_trial, tallying breaks and drops by the user's
-// phase when they happened ("b:lift", "d:align", ...).
-static TrialResult tallied_trial(const PegInHoleConfig& c, const TrialLayout& layout, Setting setting, SimulatedUser& u,
-                                 const HandModel& hand, std::shared_ptr<const haptics::FingertipDeviceModel> dev,
-                                 std::map<std::string, int>& tally) {
-  TrialResult r;
-  auto w = PegWorld::create(c, layout, setting, hand, std::move(dev));
-  if (!w) return r;
-  PegWorld& world = **w;
-  u.begin(world.now_ns(), Pose{Quat(Eigen::AngleAxisd(-0.3, Vec3::UnitX())),
-                               layout.p_peg_start_in_world + Vec3(0.0, c.peg.length_m + 0.12, 0.25)});
-  for (int t = 0; t < 120000; ++t) {
-    const HandCommand cmd = u.act(perceive(world));
-    world.submit_hand(cmd.T_world_wrist, cmd.angles);
-    const std::string ph(u.phase_name());
-    const PegEvent ev = world.step();
-    if (ev.kind == PegEvent::Kind::broke) ++tally["b:" + ph];
-    if (ev.kind == PegEvent::Kind::dropped) ++tally["d:" + ph];
-    if (ev.kind == PegEvent::Kind::inserted) {
-      r.completed = true;
-      break;
-    }
-  }
-  r.completion_time_s = world.elapsed_s();
-  r.breaks = world.breaks();
-  r.drops = world.drops();
-  return r;
-}
 int main(int argc, char** argv) {
   const int setting = argc > 1 ? std::atoi(argv[1]) : 1;
   const int trial = argc > 2 ? std::atoi(argv[2]) : 0;
@@ -181,9 +153,13 @@ int main(int argc, char** argv) {
         for (int k = 0; k < trials; ++k) {
           SimulatedTrialOptions to;
           to.time_limit_s = 120;
-          auto r = getenv("WHY") ? Result<TrialResult>(tallied_trial(c, trial_layout(c, pseed, k), setting_from_number(st),
-                                                                    u, hand, *dev, tally[st]))
-                                 : run_simulated_trial(c, trial_layout(c, pseed, k), setting_from_number(st), u, hand, *dev, to);
+          if (getenv("WHY")) {
+            to.on_event = [&tally, st](PegEvent::Kind kind, std::string_view phase) {
+              if (kind == PegEvent::Kind::broke) ++tally[st]["b:" + std::string(phase)];
+              if (kind == PegEvent::Kind::dropped) ++tally[st]["d:" + std::string(phase)];
+            };
+          }
+          auto r = run_simulated_trial(c, trial_layout(c, pseed, k), setting_from_number(st), u, hand, *dev, to);
           if (!r) return 1;
           std::printf(" %5.1f/%db%dd", r->completion_time_s, r->breaks, r->drops);
           mean_t[st] += r->completion_time_s / trials;

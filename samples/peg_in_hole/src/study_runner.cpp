@@ -93,6 +93,7 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
     const auto t0 = std::chrono::steady_clock::now();
     const PegEvent ev = world.step();
     tick_us.push_back(std::chrono::duration<float, std::micro>(std::chrono::steady_clock::now() - t0).count());
+    if (options.on_event && ev.kind != PegEvent::Kind::none) options.on_event(ev.kind, user.phase_name());
     if (rec && (tick % record_every == 0 || ev.kind != PegEvent::Kind::none)) {
       const HandPose tracked = model.forward(Handedness::right, cmd.angles, cmd.T_world_wrist, world.now_ns());
       Status st = rec->write(s_tracked, tracked);

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "proprio/haptics/servo_loop.hpp"
@@ -34,6 +35,9 @@ struct SimulatedTrialOptions {
   std::filesystem::path recording;   // empty: no recording
   double recording_rate_hz = 100.0;
   std::string recording_meta;        // JSON for the recording's event stream
+  // Called at each break, respawn, drop and insertion with the user's phase
+  // then ("lift", "align", ...): where a policy fails (peg_probe WHY=1).
+  std::function<void(PegEvent::Kind, std::string_view user_phase)> on_event;
 };
 
 // What a participant in `w` sees (the peg, its colour, the rendered hand,

@@ -5,9 +5,11 @@
 #include <cstdio>
 #include <fstream>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::haptics {
 
@@ -89,23 +91,11 @@ class Parser {
   // A key that is not part of the format is an error: a typo'd limit must not
   // silently fall back to a default.
   Status only_keys(const std::string& table, const std::vector<std::string_view>& allowed) const {
-    std::vector<std::string> keys;
-    if (table.empty()) {
-      keys = cfg_.keys();
-    } else {
-      auto t = cfg_.table(table);
-      if (!t) return t.error();
-      keys = t->keys();
-    }
-    for (const auto& k : keys) {
-      if (std::find(allowed.begin(), allowed.end(), k) == allowed.end()) {
-        const std::string key = table.empty() ? k : table + "." + k;
-        return error_at(key, Errc::invalid_argument,
-                        "is not a key of " + (table.empty() ? std::string("the top level") : "[" + table + "]") +
-                            " for this kind; allowed: " + join(allowed) + " (" + kDocs + ")");
-      }
-    }
-    return {};
+    const std::set<std::string> known(allowed.begin(), allowed.end());
+    if (table.empty()) return cfg_.check_keys("top level", known, kDocs);
+    auto t = cfg_.table(table);
+    if (!t) return t.error();
+    return t->check_keys(table, known, kDocs);
   }
 
   Status require_table(const std::string& table, const char* what) const {
@@ -430,17 +420,12 @@ Result<std::unique_ptr<FingertipDeviceModel>> parse_device_model(std::string_vie
 }
 
 Result<std::unique_ptr<FingertipDeviceModel>> load_device_model(const std::filesystem::path& toml_file) {
-  std::error_code ec;
-  if (!std::filesystem::exists(toml_file, ec)) {
-    return make_error(Errc::not_found, "haptic device file '" + toml_file.string() +
-                                           "' does not exist; config/haptics/ has band_2dof.toml, "
-                                           "platform_3dof.toml and force_vector.toml");
+  auto text = read_input_file(toml_file, "haptic device file", 16 * kMiB);
+  if (!text) {
+    if (text.error().code != Errc::not_found) return text.error();
+    return make_error(Errc::not_found, text.error().message + "; " "config/haptics/ has band_2dof.toml, platform_3dof.toml and force_vector.toml");
   }
-  std::ifstream in(toml_file);
-  if (!in) return make_error(Errc::io_error, "cannot open haptic device file '" + toml_file.string() + "' for reading");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return parse_device_model(s.str(), toml_file.string());
+  return parse_device_model(*text, toml_file.string());
 }
 
 }  // namespace proprio::haptics

@@ -221,7 +221,7 @@ TEST(StretchLayout, ParseErrorsNameFileAndLine) {
   expect_error_at(replaced(ok, "name = \"2G\"", "name = \"1G\""), "name = \"1G\", top_strip = 1", "already the name");
   expect_error_at(replaced(ok, "grid = [1, 1, 0]", "grid = [1, 0, 1]"), "name = \"2G\"", "already holds cell '2B'");
   expect_error_at(replaced(ok, "grid = [1, 1, 0]", "grid = [2, 1, 0]"), "name = \"2G\"", "outside the input grid");
-  expect_error_at(replaced(ok, "along_fraction = 0.3,", "along_frac = 0.3,"), "along_frac =", "is not a key");
+  expect_error_at(replaced(ok, "along_fraction = 0.3,", "along_frac = 0.3,"), "along_frac =", "unknown key");
   expect_error_at(replaced(ok, "segment = \"dorsum\", along_fraction = 0.3", "segment = \"palm\", along_fraction = 0.3"),
                   "\"palm\"", "not a segment");
   expect_error_at(replaced(ok, "category = \"joint\", direction = \"along\", segment = \"index_intermediate\"",

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/glove_description.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/vist/stereo_calibration.hpp"
@@ -42,25 +43,25 @@ bool refuse_overwrite(const std::string& path, bool force) {
 
 int run_calibrate_stereo(const CalibrateStereoArgs& a) {
   auto board = vist::CheckerboardSpec::parse(a.board, a.square_mm);
-  if (!board) return logger().error("--board/--square-mm: {}", board.error().message), 2;
+  if (!board) return logger().error("--board/--square-mm: {}", board.error().message), 1;
   vist::StereoCalibrationOptions options;
   options.board = *board;
   options.alpha = a.alpha;
   options.fix_k3 = !a.k3;
   options.min_pairs = a.min_pairs;
-  if (auto s = options.validate(); !s) return logger().error("{}", s.error().message), 2;
+  if (auto s = options.validate(); !s) return logger().error("{}", s.error().message), 1;
 
   // The mount and the rate are not something a checkerboard can tell; they
   // come from the user's glove file or stay the ZED Mini-like defaults.
   StereoRig mount = StereoRig::zed_mini_like();
   if (!a.glove.empty()) {
     auto g = GloveDescription::load(a.glove);
-    if (!g) return logger().error("--glove: {}", g.error().message), 2;
+    if (!g) return logger().error("--glove: {}", g.error().message), 1;
     mount = g->rig;
   }
   const double rate_hz = a.rate_hz > 0.0 ? a.rate_hz : mount.rate_hz;
-  if (refuse_overwrite(a.out, a.force)) return 2;
-  if (!a.rig_toml.empty() && refuse_overwrite(a.rig_toml, a.force)) return 2;
+  if (refuse_overwrite(a.out, a.force)) return 1;
+  if (!a.rig_toml.empty() && refuse_overwrite(a.rig_toml, a.force)) return 1;
 
   std::printf("calibrating from %s images in %s; %s\n", a.side_by_side ? "side-by-side" : "left/right",
               a.images.c_str(), options.describe().c_str());
@@ -92,10 +93,7 @@ int run_calibrate_stereo(const CalibrateStereoArgs& a) {
       vist::rig_toml_snippet(rig);
   std::printf("\nglove file [rig] table (replace the [rig] table of your glove file with it):\n\n%s\n", toml.c_str());
   if (!a.rig_toml.empty()) {
-    std::ofstream f(a.rig_toml);
-    f << toml;
-    f.close();
-    if (!f) return logger().error("cannot write '{}'; check the folder exists and is writable", a.rig_toml), 1;
+    if (auto s = write_file_atomic(a.rig_toml, toml, "rig table"); !s) return report_error(s.error());
     std::printf("wrote %s\n", a.rig_toml.c_str());
   }
   std::printf("wrote %s (intrinsics, distortion, extrinsics, rectification; StereoCalibration::load)\n",

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "proprio/core/file_io.hpp"
 #include "progress.hpp"
 #include "proprio/core/glove_description.hpp"
 #include "proprio/core/log.hpp"
@@ -160,13 +161,11 @@ bool valid_frame_at(std::span<const std::uint8_t> bytes, std::size_t at) {
 // corrupted ID byte or a torn write costs no more than the bytes up to the
 // next good report.
 int monitor_file(const MonitorArgs& a) {
-  std::ifstream in(a.from_file, std::ios::binary);
-  if (!in) {
-    return logger().error("cannot open {}: {}; pass a file written by 'proprio glove emulate --out'", a.from_file,
-                          std::strerror(errno)),
-           1;
+  auto text = read_input_file(a.from_file, "capture file", kMaxCaptureBytes);
+  if (!text) {
+    return logger().error("{}; pass a file written by 'proprio glove emulate --out'", text.error().message), 1;
   }
-  const std::vector<std::uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const std::vector<std::uint8_t> bytes(text->begin(), text->end());
   GloveStreamOptions so;
   so.nominal_rate_hz = a.rate_hz;
   GloveStreamDecoder decoder(so);
@@ -233,6 +232,11 @@ int monitor_live(const MonitorArgs& a) {
   sel.product_id = parse_hex_id(a.pid);
   sel.serial = a.serial;
   sel.path = a.path;
+  // A path that names no hidraw node will not become one: say so now rather
+  // than retrying to open it until --seconds run out.
+  if (!a.path.empty()) {
+    if (auto s = devices::check_hidraw_node(a.path); !s) return report_error(s.error());
+  }
   GloveDeviceOptions o;
   o.stream.nominal_rate_hz = a.rate_hz;
   GloveDevice device(std::make_unique<HidapiTransport>(sel), o);
@@ -349,9 +353,9 @@ int run_emulate(const EmulateArgs& a) {
     return logger().error("{} exists; pass --force to overwrite it", a.out), 1;
   }
   auto subject = sim::sim_subject(a.subject);
-  if (!subject) return logger().error("{}", subject.error().message), 2;
+  if (!subject) return logger().error("{}", subject.error().message), 1;
   auto shape = subject->shape();
-  if (!shape) return logger().error("{}", shape.error().message), 2;
+  if (!shape) return logger().error("{}", shape.error().message), 1;
   sim::HandMotionOptions mo;
   mo.protocol = *sim::parse_motion_protocol(a.protocol);  // CLI11 checked the name
   mo.hand = *parse_handedness(a.hand);
@@ -361,7 +365,7 @@ int run_emulate(const EmulateArgs& a) {
   no.sample_rate_hz = a.rate_hz;
   auto imu = sim::ImuSimulator::create(motion, GloveDescription::vist_default().place_imus(*shape, mo.hand), no,
                                        mix_seed(a.seed, 2));
-  if (!imu) return logger().error("{}", imu.error().message), 2;
+  if (!imu) return logger().error("{}", imu.error().message), 1;
 
   GloveEmulatorOptions eo;
   eo.imu_count = static_cast<std::uint8_t>(imu->imu_count());
@@ -380,8 +384,9 @@ int run_emulate(const EmulateArgs& a) {
                                  seconds_to_ns(std::strtod(u.substr(colon + 1).c_str(), nullptr))});
   }
   auto emulator = GloveEmulator::create(eo);
-  if (!emulator) return logger().error("{}", emulator.error().message), 2;
+  if (!emulator) return logger().error("{}", emulator.error().message), 1;
 
+  if (auto s = check_output_path(a.out, "capture file"); !s) return report_error(s.error());
   std::ofstream file(a.out, std::ios::binary | std::ios::trunc);
   if (!file) return logger().error("cannot write {}: {}", a.out, std::strerror(errno)), 1;
   logger().info("{}", subject->describe());

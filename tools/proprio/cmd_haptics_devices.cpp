@@ -91,6 +91,9 @@ int run_test(const TestArgs& a) {
     transport = std::make_unique<devices::FakeHidTransport>(link);
   } else {
     const bool is_path = a.device.rfind("/dev/", 0) == 0;
+    if (is_path) {
+      if (auto s = devices::check_hidraw_node(a.device); !s) return report_error(s.error());
+    }
     transport = std::make_unique<devices::HidapiTransport>(
         devices::fingertip_device_selector(is_path ? std::string() : a.device, is_path ? a.device : std::string()));
   }
@@ -147,6 +150,14 @@ int run_test(const TestArgs& a) {
   if (server) server->stop();
   std::printf("Done; the device was sent to rest. %s\nLargest normal-force difference while holding: %.3f N\n",
               gate.stats().describe().c_str(), max_err);
+  // A gate that refused commands (non-finite forces) kept the device safe, but
+  // the test did not run as asked: that is a failure, not a pass.
+  if (gate.stats().nan_commands > 0) {
+    return report_error(make_error(Errc::invalid_argument,
+                                   "the safety gate refused " + std::to_string(gate.stats().nan_commands) +
+                                       " non-finite force command(s) and output zero instead; the pattern did not "
+                                       "run as asked"));
+  }
   return 0;
 }
 

@@ -17,7 +17,9 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
+#include "proprio/core/recording.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 #include "xr_loader_paths.hpp"
 
@@ -53,10 +55,8 @@ Scope scope_of(bool system) { return system ? Scope::system : Scope::user; }
 const char* scope_name(Scope s) { return s == Scope::system ? "system-wide" : "for this user"; }
 
 std::string read_text(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+  auto text = read_input_file(p, "file", 1024 * 1024);
+  return text ? *text : std::string();
 }
 
 // What to say when the OS refuses a write under `path`.
@@ -67,29 +67,16 @@ std::string permission_hint(const fs::path& path, Scope scope) {
   return "";
 }
 
-// Write through a temporary file and rename, so a reader never sees half a file.
+// Writes through core's atomic replace, creating the folder first.
 Status write_file_atomically(const fs::path& path, const std::string& text, Scope scope) {
   std::error_code ec;
-  fs::create_directories(path.parent_path(), ec);
+  if (!path.parent_path().empty()) fs::create_directories(path.parent_path(), ec);
   if (ec) {
     return make_error(Errc::io_error, "cannot create " + path.parent_path().string() + ": " + ec.message() +
                                           permission_hint(path.parent_path(), scope));
   }
-  const fs::path tmp = path.string() + ".tmp" + std::to_string(getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      return make_error(Errc::io_error,
-                        "cannot write " + tmp.string() + ": " + std::strerror(errno) + permission_hint(path, scope));
-    }
-    out << text;
-    out.flush();
-    if (!out) return make_error(Errc::io_error, "writing " + tmp.string() + " failed: " + std::strerror(errno));
-  }
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    return make_error(Errc::io_error, "cannot replace " + path.string() + ": " + ec.message() + permission_hint(path, scope));
+  if (auto s = write_file_atomic(path, text, "file"); !s) {
+    return make_error(s.error().code, s.error().message + permission_hint(path, scope));
   }
   return {};
 }
@@ -121,8 +108,9 @@ Result<nlohmann::ordered_json> manifest_to_install(const fs::path& library, Laye
                                            (built.empty() ? std::string("unknown path") : built) +
                                            ") is missing. Build the target XrApiLayer_proprio_hand_tracking first");
   }
-  std::ifstream in(built);
-  auto j = nlohmann::ordered_json::parse(in, nullptr, /*allow_exceptions=*/false);
+  auto text = read_input_file(built, "layer manifest", 1024 * 1024);
+  if (!text) return text.error();
+  auto j = nlohmann::ordered_json::parse(*text, nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded() || !j.is_object() || !j.contains("api_layer") || !j["api_layer"].is_object()) {
     return make_error(Errc::parse_error, built + " is not a valid API layer manifest; rebuild the layer");
   }
@@ -146,7 +134,16 @@ std::string config_origin() {
   return "under HOME";
 }
 
-// Prints the layer configuration's state; true when it exists and parses.
+// Why a replay/vist source's recording cannot be served, or "" when it can.
+std::string recording_problem(const std::string& path) {
+  auto reader = RecordingReader::open(path);
+  if (!reader) return reader.error().message;
+  if (reader->streams().empty()) return "the recording '" + printable(path) + "' has no streams";
+  return {};
+}
+
+// Prints the layer configuration's state; true when it exists, parses and
+// every recording it names can be read.
 bool report_layer_config(bool describe) {
   const fs::path path = openxr_layer::default_layer_config_path();
   std::error_code ec;
@@ -165,12 +162,19 @@ bool report_layer_config(bool describe) {
   std::printf("Layer configuration: %s (%s): OK\n", path.c_str(), config_origin().c_str());
   if (describe) std::printf("  %s\n", cfg->describe().c_str());
   if (cfg->sources.empty()) std::printf("  Note: it has no [[source]], so the layer has no hands of its own to serve.\n");
-  for (const auto& s : cfg->sources) {
-    if (s.type == openxr_layer::SourceType::replay && !fs::exists(s.path, ec)) {
-      std::printf("  Warning: the replay source's recording %s does not exist.\n", s.path.c_str());
+  bool ready = true;
+  for (std::size_t i = 0; i < cfg->sources.size(); ++i) {
+    const auto& s = cfg->sources[i];
+    if (s.type != openxr_layer::SourceType::replay && s.type != openxr_layer::SourceType::vist) continue;
+    // What the layer will open inside the app: the same checks, now.
+    const std::string problem = recording_problem(s.path);
+    if (!problem.empty()) {
+      std::printf("  Problem: [[source]] #%zu (%s) cannot serve hands: %s\n", i + 1,
+                  std::string(openxr_layer::to_string(s.type)).c_str(), problem.c_str());
+      ready = false;
     }
   }
-  return true;
+  return ready;
 }
 
 bool env_set(const char* name) { return std::getenv(name) != nullptr; }
@@ -452,10 +456,10 @@ int run_status() {
                 "/usr/share/openxr/1/openxr_monado.json) or link one to ~/.config/openxr/1/active_runtime.json.\n");
   } else {
     std::printf("%s (%s)\n", rt.file->c_str(), rt.origin.c_str());
-    std::ifstream in(*rt.file);
-    auto j = in ? nlohmann::json::parse(in, nullptr, false) : nlohmann::json(nlohmann::json::value_t::discarded);
-    if (!in) {
-      std::printf("  MISSING: the file does not exist or cannot be read; no OpenXR app can start.\n");
+    auto text = read_input_file(*rt.file, "runtime manifest", 1024 * 1024);
+    auto j = text ? nlohmann::json::parse(*text, nullptr, false) : nlohmann::json(nlohmann::json::value_t::discarded);
+    if (!text) {
+      std::printf("  unusable: %s; no OpenXR app can start.\n", text.error().message.c_str());
     } else if (j.is_discarded() || !j.contains("runtime") || !j["runtime"].is_object() ||
                !j["runtime"].contains("library_path") || !j["runtime"]["library_path"].is_string()) {
       std::printf("  not a valid runtime manifest (needs \"runtime\": {\"library_path\": ...}).\n");
@@ -477,8 +481,12 @@ int run_status() {
 
   std::printf("\n");
   if (would_load) {
-    std::printf("Result: OpenXR apps started with this environment load Proprio's layer%s.\n",
-                config_ok ? "" : " (but see the configuration above)");
+    if (!config_ok) {
+      std::printf("Result: OpenXR apps started with this environment load Proprio's layer, but it cannot serve "
+                  "hands until its configuration is fixed (see above).\n");
+      return 2;
+    }
+    std::printf("Result: OpenXR apps started with this environment load Proprio's layer.\n");
     if (!rt.file) std::printf("  They need an active runtime first (see above).\n");
     return 0;
   }
@@ -570,7 +578,8 @@ void add_layer_commands(CLI::App& app, int& exit_code) {
       "Say what the OpenXR loader would do in this environment: the loader's environment variables, every Proprio "
       "layer manifest in its search paths (and whether its library loads and whether it is enabled), the active "
       "runtime, and whether the layer configuration parses.\n"
-      "Exit status: 0 when apps started from here would load the layer, 1 when they would not.");
+      "Exit status: 0 when apps started from here would load the layer and it can serve hands; 1 when they would "
+      "not load it; 2 when they would, but its configuration is missing or names a recording it cannot read.");
   cmd->callback([&exit_code] { exit_code = run_status(); });
 
   auto init = std::make_shared<InitConfigArgs>();

@@ -146,18 +146,18 @@ int run_sim_glove(const SimGloveArgs& a) {
     logger().error("subjects {}-{} do not all exist: the simulated pool is subjects 0-{}; lower --subjects or "
                    "--first-subject",
                    a.first_subject, a.first_subject + a.subjects - 1, sim::kSimSubjectCount - 1);
-    return 2;
+    return 1;
   }
   StretchGloveLayout layout = StretchGloveLayout::thesis_default();
   if (!a.layout.empty()) {
     auto loaded = StretchGloveLayout::load(a.layout);
-    if (!loaded) return logger().error("{}", loaded.error().message), 2;
+    if (!loaded) return logger().error("{}", loaded.error().message), 1;
     layout = std::move(*loaded);
   }
   std::vector<Job> jobs;
   for (int k = 0; k < a.subjects; ++k) {
     auto subject = sim::sim_subject(a.first_subject + k);
-    if (!subject) return logger().error("{}", subject.error().message), 2;
+    if (!subject) return logger().error("{}", subject.error().message), 1;
     for (int s = 0; s < a.sessions; ++s) jobs.push_back({*subject, s});
   }
 

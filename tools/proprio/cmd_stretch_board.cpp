@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/devices/hid_transport.hpp"
 #include "proprio/devices/stretch_device.hpp"
@@ -212,14 +213,14 @@ StretchStreamOptions stream_options(const MonitorArgs& a) {
 // report, a corrupted ID byte or a torn write no more than the bytes up to
 // the next good report.
 int monitor_file(const MonitorArgs& a) {
-  std::ifstream in(a.from_file, std::ios::binary);
-  if (!in) {
-    return logger().error("cannot open {}: {}; pass a file written by 'proprio stretch-board emulate --out' or "
-                          "captured with 'cat /dev/hidrawN'",
-                          a.from_file, std::strerror(errno)),
+  auto text = read_input_file(a.from_file, "capture file", kMaxCaptureBytes);
+  if (!text) {
+    return logger().error("{}; pass a file written by 'proprio stretch-board emulate --out' or captured with "
+                          "'cat /dev/hidrawN'",
+                          text.error().message),
            1;
   }
-  const std::vector<std::uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const std::vector<std::uint8_t> bytes(text->begin(), text->end());
   StretchStreamDecoder decoder(stream_options(a));
   std::array<StretchSample, kStretchMeasurementsPerReport> out;
   LatestValues latest;
@@ -372,6 +373,11 @@ int monitor_live(const MonitorArgs& a) {
   sel.product_id = parse_hex_id(a.pid);
   sel.serial = a.serial;
   sel.path = a.path;
+  // A path that names no hidraw node will not become one: say so now rather
+  // than retrying to open it until --seconds run out.
+  if (!a.path.empty()) {
+    if (auto s = devices::check_hidraw_node(a.path); !s) return report_error(s.error());
+  }
   StretchDeviceOptions o;
   o.stream = stream_options(a);
   StretchDevice device(std::make_unique<HidapiTransport>(sel), o);
@@ -474,7 +480,8 @@ void print_board_faults(const StretchEmulatorStats& st) {
 int emulate_to_file(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   if (!a.force && std::filesystem::exists(a.out)) return logger().error("{} exists; pass --force to overwrite it", a.out), 1;
   auto emulator = StretchEmulator::create(eo, SyntheticProvider{static_cast<std::size_t>(a.bottom_strips)});
-  if (!emulator) return logger().error("{}", emulator.error().message), 2;
+  if (!emulator) return logger().error("{}", emulator.error().message), 1;
+  if (auto s = check_output_path(a.out, "capture file"); !s) return report_error(s.error());
   std::ofstream file(a.out, std::ios::binary | std::ios::trunc);
   if (!file) return logger().error("cannot write {}: {}", a.out, std::strerror(errno)), 1;
   std::vector<StretchEmulatedReport> reports;
@@ -500,7 +507,7 @@ int emulate_to_file(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
 int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   const SyntheticProvider provider{static_cast<std::size_t>(a.bottom_strips)};
   auto emulator = StretchEmulator::create(eo, provider);
-  if (!emulator) return logger().error("{}", emulator.error().message), 2;
+  if (!emulator) return logger().error("{}", emulator.error().message), 1;
   auto link = std::make_shared<FakeHidLink>();
   StretchEmulatorServer server(std::move(*emulator), link);
   StretchDeviceOptions o;
@@ -589,7 +596,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
 
 int run_emulate(const EmulateArgs& a) {
   const StretchEmulatorOptions eo = emulator_options(a);
-  if (auto s = eo.validate(); !s) return logger().error("{}", s.error().message), 2;
+  if (auto s = eo.validate(); !s) return logger().error("{}", s.error().message), 1;
   return a.out.empty() ? emulate_live(a, eo) : emulate_to_file(a, eo);
 }
 

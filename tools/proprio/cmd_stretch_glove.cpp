@@ -49,7 +49,7 @@ int run_bench_glove(const BenchGloveArgs& a) {
   auto layout = load_layout(a.layout);
   if (!layout) {
     std::fprintf(stderr, "error: %s\n", layout.error().message.c_str());
-    return 2;
+    return 1;
   }
   struct Job {
     glove_eval::GloveSessionSpec spec;
@@ -197,11 +197,11 @@ int run_calibrate_glove(const CalibrateGloveArgs& a) {
   auto layout = load_layout(a.layout);
   if (!layout) {
     std::fprintf(stderr, "error: %s\n", layout.error().message.c_str());
-    return 2;
+    return 1;
   }
   if (!a.force && std::filesystem::exists(a.out)) {
     std::fprintf(stderr, "error: %s exists; pass --force to overwrite it\n", a.out.c_str());
-    return 2;
+    return 1;
   }
   std::printf("Explore for %.0f s: make a fist, spread and close the fingers, bend each finger on its own, move the "
               "thumb across the palm and out\n",

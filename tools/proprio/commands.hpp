@@ -45,6 +45,9 @@ inline std::string check_hex_id(const std::string& text) {
   return {};
 }
 
+// `--from-file` captures are read whole: an hour of a 1 kHz board is ~100 MB.
+inline constexpr std::uint64_t kMaxCaptureBytes = 1024ull * 1024ull * 1024ull;
+
 // Long-running commands stop cleanly on Ctrl-C: install on_sigint_stop and
 // poll g_sigint_stop; a second Ctrl-C ends the process at once.
 inline std::atomic<bool> g_sigint_stop{false};

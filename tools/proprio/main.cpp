@@ -3,6 +3,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "option_checks.hpp"
 #include "proprio/core/log.hpp"
 
 int main(int argc, char** argv) {
@@ -13,6 +14,9 @@ int main(int argc, char** argv) {
   std::string log_level = "info";
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error or off")->capture_default_str();
   app.require_subcommand(1);
+  app.footer(
+      "Exit status: 0 success; 1 an error (a bad option or value, unreadable input, a failed run), with a message "
+      "on stderr. Some commands add codes of their own, listed in their --help.");
 
   int exit_code = 0;
   proprio::cli::add_sim_hand_command(app, exit_code);
@@ -34,6 +38,7 @@ int main(int argc, char** argv) {
   proprio::cli::add_layer_commands(app, exit_code);
   proprio::cli::add_xr_probe_command(app, exit_code);
 #endif
+  proprio::cli::harden_numeric_options(app);
   app.parse_complete_callback([&] {
     if (auto s = proprio::set_log_level(log_level); !s) throw CLI::ValidationError("--log-level", s.error().message);
   });
@@ -41,7 +46,10 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // CLI11's own codes (105 for an invalid value, 106 for a missing one, ...)
+    // are not ours to document: every usage error is the general error, 1.
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 1;
   }
   return exit_code;
 }

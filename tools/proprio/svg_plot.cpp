@@ -1,5 +1,7 @@
 #include "svg_plot.hpp"
 
+#include "proprio/core/file_io.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -98,11 +100,7 @@ Status write_svg_plot(const std::filesystem::path& path, const std::string& titl
     }
   }
   svg << "</svg>\n";
-  std::ofstream out(path);
-  if (!out) return make_error(Errc::io_error, "cannot write plot to '" + path.string() + "'");
-  out << svg.str();
-  if (!out.flush()) return make_error(Errc::io_error, "writing plot to '" + path.string() + "' failed");
-  return {};
+  return write_file_atomic(path, svg.str(), "plot");
 }
 
 }  // namespace proprio::cli

@@ -1,5 +1,7 @@
 #include "xr_loader_paths.hpp"
 
+#include "proprio/core/file_io.hpp"
+
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
@@ -105,13 +107,19 @@ RuntimeLookup find_active_runtime() {
 }
 
 std::optional<LayerManifest> read_layer_manifest(const fs::path& file, LayerKind kind, std::string origin) {
-  std::ifstream in(file);
-  if (!in) return std::nullopt;
+  std::error_code ec;
+  if (!fs::exists(file, ec)) return std::nullopt;
   LayerManifest m;
   m.file = file;
   m.kind = kind;
   m.origin = std::move(origin);
-  auto j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  // What sits in a manifest folder is not ours: never block on a FIFO there.
+  auto text = read_input_file(file, "layer manifest", 1024 * 1024);
+  if (!text) {
+    m.parse_error = text.error().message;
+    return m;
+  }
+  auto j = nlohmann::json::parse(*text, nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded() || !j.is_object() || !j.contains("api_layer") || !j["api_layer"].is_object()) {
     m.parse_error = "not a valid API layer manifest (JSON object with an \"api_layer\" object)";
     return m;

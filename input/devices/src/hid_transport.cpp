@@ -2,11 +2,16 @@
 #include "proprio/devices/hid_transport.hpp"
 
 #include <hidapi.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
 
 #include <algorithm>
 #include <climits>
 #include <cstdio>
+#include <filesystem>
 #include <mutex>
+
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::devices {
 
@@ -92,6 +97,31 @@ std::string HidDeviceSelector::describe() const {
   return s;
 }
 
+Status check_hidraw_node(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    return make_error(Errc::not_found, "'" + printable(path) + "' does not exist: is the device plugged in? " +
+                                           "'proprio glove list --all' shows the HID devices there are");
+  }
+  std::string why;
+  if (!S_ISCHR(st.st_mode)) {
+    why = S_ISDIR(st.st_mode) ? "a directory" : S_ISREG(st.st_mode) ? "a regular file" : "not a device node";
+  } else {
+    // hidapi's hidraw backend issues hidraw ioctls on whatever it opens, and
+    // some other character devices make it crash: only hidraw nodes get through.
+    const std::string link = "/sys/dev/char/" + std::to_string(major(st.st_rdev)) + ":" +
+                             std::to_string(minor(st.st_rdev)) + "/subsystem";
+    std::error_code ec;
+    const auto subsystem = std::filesystem::read_symlink(link, ec);
+    if (ec || subsystem.filename() != "hidraw") why = "a character device that is not a hidraw node";
+  }
+  if (!why.empty()) {
+    return make_error(Errc::invalid_argument, "'" + printable(path) + "' is " + why +
+                                                  "; pass a /dev/hidrawN node ('proprio glove list --all' lists them)");
+  }
+  return Status::success();
+}
+
 HidapiTransport::HidapiTransport(HidDeviceSelector selector) : selector_(std::move(selector)) {}
 
 HidapiTransport::~HidapiTransport() { close(); }
@@ -107,6 +137,7 @@ Status HidapiTransport::open() {
 
   HidDeviceInfo chosen;
   if (!selector_.path.empty()) {
+    if (auto s = check_hidraw_node(selector_.path); !s) return s;
     chosen.path = selector_.path;
     // Fill in what the OS knows about that node, for describe(); opening does not depend on it.
     if (auto all = enumerate_hid_devices(); all) {

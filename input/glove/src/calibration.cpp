@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::glove {
 
@@ -130,31 +131,16 @@ std::string MinMaxCalibration::to_toml() const {
 
 Status MinMaxCalibration::save(const std::filesystem::path& path) const {
   if (auto st = validate(); !st) return st.error().with_context("not saving calibration '" + path.string() + "'");
-  const auto tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return make_error(Errc::io_error, "cannot write calibration '" + tmp + "'; check the folder exists");
-    out << to_toml();
-    if (!out.flush()) return make_error(Errc::io_error, "writing calibration '" + tmp + "' failed (disk full?)");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);  // a crash never leaves half a file under the real name
-  if (ec) return make_error(Errc::io_error, "cannot rename '" + tmp + "' to '" + path.string() + "': " + ec.message());
-  return {};
+  return write_file_atomic(path, to_toml(), "calibration file");
 }
 
 Result<MinMaxCalibration> MinMaxCalibration::parse(std::string_view toml_text, const std::string& source_name) {
   auto cfg = Config::parse(toml_text, source_name);
   if (!cfg) return cfg.error().with_context("calibration file is corrupted");
-  const std::vector<std::string_view> allowed = {"layout",  "cell_count", "median_frames", "frames",
-                                                 "source",  "created",    "min_pf",        "max_pf"};
-  for (const auto& k : cfg->keys()) {
-    if (std::find(allowed.begin(), allowed.end(), k) == allowed.end()) {
-      return make_error(Errc::invalid_argument, cfg->where(k) + ": '" + k +
-                                                    "' is not a key of a calibration file; allowed: layout, "
-                                                    "cell_count, median_frames, frames, source, created, min_pf, "
-                                                    "max_pf");
-    }
+  if (auto k = cfg->check_keys("calibration file", {"layout", "cell_count", "median_frames", "frames", "source",
+                                                     "created", "min_pf", "max_pf"});
+      !k) {
+    return k.error();
   }
   MinMaxCalibration c;
   auto layout = cfg->get_string_or("layout", "");
@@ -201,16 +187,12 @@ Result<MinMaxCalibration> MinMaxCalibration::parse(std::string_view toml_text, c
 }
 
 Result<MinMaxCalibration> MinMaxCalibration::load(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return make_error(Errc::not_found, "calibration file '" + path.string() +
-                                           "' does not exist; make one with a calibration run first");
+  auto text = read_input_file(path, "calibration file", 16 * kMiB);
+  if (!text) {
+    if (text.error().code != Errc::not_found) return text.error();
+    return make_error(Errc::not_found, text.error().message + "; " "make one with 'proprio calibrate glove' first");
   }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return make_error(Errc::io_error, "cannot open calibration file '" + path.string() + "' for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  return parse(*text, path.string());
 }
 
 // --- the calibrator -------------------------------------------------------------------

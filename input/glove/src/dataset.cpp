@@ -1,4 +1,5 @@
 #include "proprio/glove/dataset.hpp"
+#include "proprio/core/file_io.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -102,6 +103,7 @@ Result<NpyWriter> NpyWriter::create(const std::filesystem::path& path, NpyType t
   if (w.header(std::size_t{1} << 62).size() != kHeaderBytes) {
     return make_error(Errc::invalid_argument, "the .npy shape is too long for the reserved header");
   }
+  if (auto st = check_output_path(path, "dataset array"); !st) return st.error();
   w.out_ = std::make_unique<std::ofstream>(path, std::ios::binary | std::ios::trunc);
   if (!*w.out_) return io_error(path, "cannot be created; check the folder exists and is writable");
   const std::string h = w.header(0);
@@ -311,17 +313,7 @@ Status DatasetWriter::finish(const std::string& generator_json) {
   j << "  \"generator\": " << (generator_json.empty() ? std::string("{}") : generator_json) << "\n";
   j << "}\n";
 
-  const auto meta = dir_ / "meta.json";
-  const auto tmp = dir_ / "meta.json.tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return io_error(tmp, "cannot be created");
-    out << j.str();
-    if (!out.flush()) return io_error(tmp, "writing failed (disk full?)");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, meta, ec);
-  if (ec) return io_error(meta, "cannot be written: " + ec.message());
+  if (auto st = write_file_atomic(dir_ / "meta.json", j.str(), "dataset description"); !st) return st;
   finished_ = true;
   return {};
 }

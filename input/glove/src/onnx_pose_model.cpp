@@ -13,6 +13,7 @@
 #include <opencv2/dnn.hpp>
 
 #include "proprio/core/recording.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::glove {
 namespace {
@@ -52,19 +53,13 @@ Error sidecar_error(const std::string& source, const std::string& what) {
 }
 
 Result<std::vector<std::uint8_t>> read_bytes(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return make_error(Errc::not_found, path.string() + ": no such file; train a model with tools/stretch_glove/train.py "
-                                                        "(see tools/stretch_glove/README.md)");
+  // The glove's networks are a few MB; 512 MiB bounds a wrong file.
+  auto text = read_input_file(path, "ONNX model", 512 * kMiB);
+  if (!text) {
+    if (text.error().code != Errc::not_found) return text.error();
+    return make_error(Errc::not_found, text.error().message + "; " "train a model with tools/stretch_glove/train.py (see tools/stretch_glove/README.md)");
   }
-  if (std::filesystem::is_directory(path, ec)) {
-    return make_error(Errc::invalid_argument, path.string() + ": is a directory, expected an .onnx file");
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return make_error(Errc::io_error, path.string() + ": cannot be opened for reading (check permissions)");
-  std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) return make_error(Errc::io_error, path.string() + ": read failed");
-  return bytes;
+  return std::vector<std::uint8_t>(text->begin(), text->end());
 }
 
 }  // namespace
@@ -211,11 +206,9 @@ Result<PoseModelSidecar> PoseModelSidecar::parse(const std::string& json_text, c
 }
 
 Result<PoseModelSidecar> PoseModelSidecar::load(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::not_found, path.string() + ": cannot be opened (the model's sidecar .json)");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  auto text = read_input_file(path, "model sidecar (.json)", 16 * kMiB);
+  if (!text) return text.error();
+  return parse(*text, path.string());
 }
 
 Status PoseModelSidecar::check_against(const StretchGloveLayout& layout, const std::string& source_name) const {

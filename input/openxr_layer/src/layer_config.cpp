@@ -3,10 +3,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
-#include <sstream>
+#include <set>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::openxr_layer {
 
@@ -91,19 +91,44 @@ Result<T> choose(const Config& c, std::string_view key, std::string fallback,
     if (*v == name) return value;
     allowed += (allowed.empty() ? "" : ", ") + std::string(name);
   }
-  return make_error(Errc::invalid_argument, c.source_name() + ": '" + std::string(key) + "' = \"" + *v +
+  return make_error(Errc::invalid_argument, c.source_name() + ": '" + std::string(key) + "' = \"" + printable(*v, 80) +
                                                 "\" is not one of: " + allowed);
 }
 
-Result<Vec3> vec3(const Config& c, std::string_view key) {
+// Offsets beyond `limit` are typos, and huge ones turn into invalid poses
+// downstream (the runtime refuses the reference space, so hand tracking that
+// the layer advertised would fail at tracker creation).
+Result<Vec3> vec3(const Config& c, std::string_view key, double limit) {
   if (!c.contains(key)) return Vec3(Vec3::Zero());
   auto v = c.get_doubles(key);
   if (!v) return v.error();
   if (v->size() != 3) {
     return make_error(Errc::invalid_argument,
-                      c.source_name() + ": '" + std::string(key) + "' needs 3 numbers, got " + std::to_string(v->size()));
+                      c.where(key) + ": '" + std::string(key) + "' needs 3 numbers, got " + std::to_string(v->size()));
+  }
+  for (double x : *v) {
+    if (std::fabs(x) > limit) {
+      return make_error(Errc::invalid_argument, c.where(key) + ": '" + std::string(key) + "' has " +
+                                                    std::to_string(x) + "; each component must be within +-" +
+                                                    std::to_string(static_cast<int>(limit)));
+    }
   }
   return Vec3((*v)[0], (*v)[1], (*v)[2]);
+}
+
+// The keys each kind of [[source]] reads; anything else is a typo that
+// would otherwise be ignored silently.
+std::set<std::string> source_keys(SourceType type) {
+  std::set<std::string> k{"type", "space", "hands", "offset_position_m", "offset_rotation_deg"};
+  switch (type) {
+    case SourceType::glove:
+      k.insert({"input", "calibration", "hand_length_m", "hand_width_m", "subject", "seed", "model", "layout"});
+      break;
+    case SourceType::sim: k.insert({"protocol", "subject", "seed", "rate_hz"}); break;
+    case SourceType::replay:
+    case SourceType::vist: k.insert({"path", "loop"}); break;
+  }
+  return k;
 }
 
 Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
@@ -116,6 +141,9 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
                                   {"glove", SourceType::glove}});
   if (!type) return type.error().with_context(where);
   s.type = *type;
+  if (auto k = c.check_keys("source", source_keys(s.type)); !k) {
+    return k.error().with_context(where + " (type \"" + std::string(to_string(s.type)) + "\")");
+  }
   const bool head_relative = s.type == SourceType::sim || s.type == SourceType::glove;
   auto space = choose<ReferenceSpace>(c, "space", head_relative ? "view" : "local",
                                       {{"view", ReferenceSpace::view}, {"local", ReferenceSpace::local},
@@ -134,9 +162,9 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
     }
     if (s.hands.empty()) return make_error(Errc::invalid_argument, where + ": 'hands' is empty");
   }
-  auto p = vec3(c, "offset_position_m");
+  auto p = vec3(c, "offset_position_m", 1000.0);
   if (!p) return p.error().with_context(where);
-  auto r = vec3(c, "offset_rotation_deg");
+  auto r = vec3(c, "offset_rotation_deg", 360.0);
   if (!r) return r.error().with_context(where);
   s.T_space_source = {so3_exp(*r * (M_PI / 180.0)), *p};
 
@@ -213,9 +241,13 @@ Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::st
   if (!c) return c.error();
   LayerConfig cfg;
   cfg.origin = source_name;
+  if (auto k = c->check_keys("top level", {"layer", "source"}); !k) return k.error();
   if (c->contains("layer")) {
     auto layer = c->table("layer");
     if (!layer) return layer.error();
+    if (auto k = layer->check_keys("layer", {"runtime_hand_tracking", "max_prediction_ms", "stale_timeout_ms"}); !k) {
+      return k.error();
+    }
     auto mode = choose<RuntimeHandTracking>(*layer, "runtime_hand_tracking", "auto",
                                             {{"auto", RuntimeHandTracking::automatic},
                                              {"override", RuntimeHandTracking::override_it},
@@ -242,13 +274,11 @@ Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::st
 }
 
 Result<LayerConfig> load_layer_config(const std::filesystem::path& path) {
-  auto c = Config::load_file(path);
-  if (!c) return c.error();
-  // Parse through the same path as text so both entry points behave alike.
-  std::ifstream in(path);
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse_layer_config(text.str(), path.string());
+  // The layer reads this inside someone else's app: never a FIFO (it would
+  // block instance creation) or a device, and never more than a config's worth.
+  auto text = read_input_file(path, "layer config", kMaxLayerConfigBytes);
+  if (!text) return text.error();
+  return parse_layer_config(*text, path.string());
 }
 
 std::string example_layer_config(const std::string& recording_path) {

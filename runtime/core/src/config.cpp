@@ -1,5 +1,7 @@
 #include "proprio/core/config.hpp"
 
+#include "proprio/core/file_io.hpp"
+
 #include <toml++/toml.h>
 
 #include <cmath>
@@ -93,15 +95,10 @@ Result<Config> Config::parse(std::string_view toml_text, std::string source_name
 }
 
 Result<Config> Config::load_file(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return make_error(Errc::not_found, "config file '" + path.string() + "' does not exist");
-  }
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::io_error, "cannot open config file '" + path.string() + "' for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  // TOML files are hand-written configuration: 16 MiB is far beyond any.
+  auto text = read_input_file(path, "config file", 16 * kMiB);
+  if (!text) return text.error();
+  return parse(*text, path.string());
 }
 
 Result<bool> Config::get_bool(std::string_view key) const {
@@ -239,13 +236,14 @@ std::vector<std::string> Config::keys() const {
   return out;
 }
 
-Status Config::check_keys(std::string_view table, const std::set<std::string>& known) const {
+Status Config::check_keys(std::string_view table, const std::set<std::string>& known, std::string_view hint) const {
   for (const std::string& k : keys()) {
     if (known.count(k) == 0) {
       std::string list;
       for (const std::string& n : known) list += (list.empty() ? "" : ", ") + n;
-      return make_error(Errc::invalid_argument, where(k) + ": unknown key '" + k + "' in [" + std::string(table) +
-                                                    "]; known keys: " + list);
+      return make_error(Errc::invalid_argument, where(k) + ": unknown key '" + printable(k, 80) + "' in [" + std::string(table) +
+                                                    "]; known keys: " + list +
+                                                    (hint.empty() ? std::string() : " (" + std::string(hint) + ")"));
     }
   }
   return Status::success();

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio {
 
@@ -486,15 +487,7 @@ class Parser {
   // A key that is not part of the format is an error: a typo ("along_fraction"
   // spelt "along_frac") must not silently fall back to a default.
   Status only_keys(const Config& t, const std::string& prefix, const std::vector<std::string_view>& allowed) const {
-    for (const auto& k : t.keys()) {
-      if (std::find(allowed.begin(), allowed.end(), k) == allowed.end()) {
-        const std::string key = prefix.empty() ? k : prefix + "." + k;
-        return error_at(key, Errc::invalid_argument,
-                        "is not a key of " + (prefix.empty() ? std::string("the top level") : label(prefix)) +
-                            "; allowed keys: " + join(allowed));
-      }
-    }
-    return {};
+    return t.check_keys(prefix.empty() ? "top level" : prefix, {allowed.begin(), allowed.end()}, "docs/vist-glove.md");
   }
 
   Result<double> required_in(const Config& t, const std::string& prefix, std::string_view key, double min,
@@ -746,16 +739,12 @@ Result<GloveDescription> GloveDescription::parse(std::string_view toml_text, con
 }
 
 Result<GloveDescription> GloveDescription::load(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return make_error(Errc::not_found, "glove description '" + path.string() +
-                                           "' does not exist; config/vist_glove.toml is the thesis's glove");
+  auto text = read_input_file(path, "glove description", 16 * kMiB);
+  if (!text) {
+    if (text.error().code != Errc::not_found) return text.error();
+    return make_error(Errc::not_found, text.error().message + "; " "config/vist_glove.toml is the thesis's glove");
   }
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::io_error, "cannot open glove description '" + path.string() + "' for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  return parse(*text, path.string());
 }
 
 std::string GloveDescription::to_toml() const {

@@ -12,6 +12,7 @@
 
 #include "proprio/core/config.hpp"
 #include "proprio/core/glove_description.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio {
 
@@ -541,15 +542,8 @@ class LayoutParser {
   }
 
   Status only_keys(const Config& t, const std::string& prefix, const std::vector<std::string_view>& allowed) const {
-    for (const auto& k : t.keys()) {
-      if (std::find(allowed.begin(), allowed.end(), k) == allowed.end()) {
-        const std::string key = prefix.empty() ? k : prefix + "." + k;
-        return error_at(key, Errc::invalid_argument,
-                        "is not a key of " + (prefix.empty() ? std::string("the top level") : prefix) +
-                            "; allowed keys: " + join(allowed));
-      }
-    }
-    return {};
+    return t.check_keys(prefix.empty() ? "top level" : prefix, {allowed.begin(), allowed.end()},
+                        "docs/stretch-glove-layout.md");
   }
 
   Result<int> strip_count(const char* key) const {
@@ -696,16 +690,12 @@ Result<StretchGloveLayout> StretchGloveLayout::parse(std::string_view toml_text,
 }
 
 Result<StretchGloveLayout> StretchGloveLayout::load(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return make_error(Errc::not_found, "stretch-glove layout '" + path.string() +
-                                           "' does not exist; config/stretch_glove.toml is the thesis-like glove");
+  auto text = read_input_file(path, "stretch-glove layout", 16 * kMiB);
+  if (!text) {
+    if (text.error().code != Errc::not_found) return text.error();
+    return make_error(Errc::not_found, text.error().message + "; " "config/stretch_glove.toml is the thesis-like glove");
   }
-  std::ifstream in(path);
-  if (!in) return make_error(Errc::io_error, "cannot open stretch-glove layout '" + path.string() + "' for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  return parse(*text, path.string());
 }
 
 std::string StretchGloveLayout::to_toml() const {

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::engine {
 namespace {
@@ -51,6 +52,12 @@ constexpr ShapeName kShapes[] = {{"box", ShapeKind::box},
 
 Result<Entity> parse_object(const Config& c, const std::filesystem::path& base_dir) {
   Entity e;
+  if (auto k = c.check_keys("object", {"name", "shape", "file", "radius", "half_length", "hole_radius",
+                                       "half_extents", "position", "rotation_deg", "mass", "friction", "physics",
+                                       "color"});
+      !k) {
+    return k.error();
+  }
   auto name = c.get_string("name");
   if (!name) return name.error();
   auto shape = c.get_string("shape");
@@ -210,6 +217,9 @@ Result<Scene> Scene::parse(std::string_view toml_text, const std::string& source
                            const std::filesystem::path& base_dir) {
   auto cfg = Config::parse(toml_text, source_name);
   if (!cfg) return cfg.error();
+  if (auto k = cfg->check_keys("top level", {"preset", "name", "floor_height", "focus", "object"}); !k) {
+    return k.error();
+  }
   Scene scene;
   auto preset_name = cfg->get_string_or("preset", "empty");
   if (!preset_name) return preset_name.error();
@@ -243,12 +253,9 @@ Result<Scene> Scene::parse(std::string_view toml_text, const std::string& source
 Result<Scene> Scene::load(const std::string& preset_or_file) {
   const std::filesystem::path path(preset_or_file);
   if (path.extension() != ".toml") return preset(preset_or_file);
-  auto cfg = Config::load_file(path);  // reads the file with clear errors
-  if (!cfg) return cfg.error();
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string(), path.parent_path());
+  auto text = read_input_file(path, "scene file", 16 * kMiB);
+  if (!text) return text.error();
+  return parse(*text, path.string(), path.parent_path());
 }
 
 }  // namespace proprio::engine

@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/random.hpp"
 
 namespace proprio::hmd_calibration {
@@ -92,20 +93,23 @@ std::vector<Vec3> simulate_reaching(const Pose& T_true, const std::vector<Vec3>&
 }
 
 Status save_calibration(const std::filesystem::path& path, const RigidFit& fit) {
-  std::ofstream f(path);
   const Pose& T = fit.T_hmd_graphics;
-  f << "# HMD calibration (proprio run hmd-calibration): p_hmd = R * p_graphics + t\n"
-    << "[hmd_calibration]\n"
-    << fmt::format("translation_m = [{:.6f}, {:.6f}, {:.6f}]\n", T.p.x(), T.p.y(), T.p.z())
-    << fmt::format("rotation_xyzw = [{:.8f}, {:.8f}, {:.8f}, {:.8f}]\n", T.q.x(), T.q.y(), T.q.z(), T.q.w())
-    << fmt::format("rms_m = {:.6f}\nmax_m = {:.6f}\npairs = {}\n", fit.rms_m, fit.max_m, fit.pairs);
-  if (!f) return make_error(Errc::io_error, "cannot write " + path.string());
-  return {};
+  std::string text = "# HMD calibration (proprio run hmd-calibration): p_hmd = R * p_graphics + t\n[hmd_calibration]\n";
+  text += fmt::format("translation_m = [{:.6f}, {:.6f}, {:.6f}]\n", T.p.x(), T.p.y(), T.p.z());
+  text += fmt::format("rotation_xyzw = [{:.8f}, {:.8f}, {:.8f}, {:.8f}]\n", T.q.x(), T.q.y(), T.q.z(), T.q.w());
+  text += fmt::format("rms_m = {:.6f}\nmax_m = {:.6f}\npairs = {}\n", fit.rms_m, fit.max_m, fit.pairs);
+  return write_file_atomic(path, text, "HMD calibration");
 }
 
 Result<Pose> load_calibration(const std::filesystem::path& path) {
   auto c = Config::load_file(path);
   if (!c) return c.error();
+  if (auto k = c->check_keys("top level", {"hmd_calibration"}); !k) return k.error();
+  auto table = c->table("hmd_calibration");
+  if (!table) return table.error();
+  if (auto k = table->check_keys("hmd_calibration", {"translation_m", "rotation_xyzw", "rms_m", "max_m", "pairs"}); !k) {
+    return k.error();
+  }
   auto t = c->get_doubles("hmd_calibration.translation_m");
   auto q = c->get_doubles("hmd_calibration.rotation_xyzw");
   if (!t) return t.error();

@@ -86,6 +86,10 @@ struct HidDeviceSelector {
   std::string describe() const;
 };
 
+// An explicit device path must name a hidraw character device: anything else
+// (/dev/null, /dev/zero, a regular file) is refused before hidapi sees it.
+Status check_hidraw_node(const std::string& path);
+
 class HidapiTransport final : public HidTransport {
  public:
   explicit HidapiTransport(HidDeviceSelector selector = {});

@@ -76,6 +76,8 @@ struct LayerConfig {
 
 // $PROPRIO_LAYER_CONFIG, else $XDG_CONFIG_HOME/proprio/layer.toml, else ~/.config/proprio/layer.toml.
 std::filesystem::path default_layer_config_path();
+// A layer config is a few hundred bytes; this bounds what an app reads at start-up.
+inline constexpr std::uint64_t kMaxLayerConfigBytes = 1024 * 1024;
 Result<LayerConfig> load_layer_config(const std::filesystem::path& path);
 Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::string& source_name);
 // A complete, commented configuration using the simulated hand (or a replay

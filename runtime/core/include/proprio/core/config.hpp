@@ -46,8 +46,9 @@ class Config {
   std::vector<std::string> keys() const;
   // A typo'd key must not pass silently: an error naming the first key that is
   // not in `known`, where it is, and the keys that are allowed. `table` names
-  // the table in the message ("top level", "study", ...).
-  Status check_keys(std::string_view table, const std::set<std::string>& known) const;
+  // the table in the message ("top level", "study", ...); `hint` (a docs
+  // pointer) ends the message. Every TOML reader of Proprio uses this rule.
+  Status check_keys(std::string_view table, const std::set<std::string>& known, std::string_view hint = {}) const;
 
   const std::string& source_name() const noexcept;
   // "file:line:col" of a key (dotted, relative to this table), or just the

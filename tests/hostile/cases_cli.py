@@ -1,0 +1,253 @@
+"""Hostile inputs for the CLI's shared mechanisms: numeric options, seeds, config
+and data files that are special files, unknown keys, device paths, the OpenXR
+layer's config and status, exit codes and messages (issue 23)."""
+import os
+
+from hostile import case
+
+SIM_HAND_NAN = ["sim-hand", "--seconds", "nan", "--out", "x.prec"]
+
+# --- 23.7: NaN and inf never pass a numeric option -------------------------------------
+
+
+@case("23.7 sim-hand --seconds nan is refused before anything is written")
+def _(t):
+    t.run(*SIM_HAND_NAN).fails_cleanly(r"--seconds.*'nan' is not a finite number")
+    assert not t.path("x.prec").exists(), "a recording was written for a NaN duration"
+
+
+@case("23.7 sim-hand --seconds inf / -inf / 1e999 are refused")
+def _(t):
+    for v in ("inf", "-inf", "1e999", "infinity"):
+        t.run("sim-hand", "--seconds", v, "--out", "x.prec").fails_cleanly(r"not a finite number|not in range")
+
+
+@case("23.7 replay --replay-rate nan is refused, no hang")
+def _(t):
+    t.run("sim-hand", "--seconds", "1", "--out", "a.prec").expect(rc=0)
+    t.watch("a.prec")
+    t.run("replay", "a.prec", "--replay-rate", "nan", timeout=20).fails_cleanly(r"not a finite number")
+
+
+@case("23.7 xr-probe --seconds nan is refused, no hang")
+def _(t):
+    t.run("xr-probe", "--seconds", "nan", timeout=20).fails_cleanly(r"--seconds.*not a finite number")
+
+
+@case("23.7 glove monitor --seconds nan is refused, no hang")
+def _(t):
+    t.run("glove", "monitor", "--seconds", "nan", timeout=20).fails_cleanly(r"not a finite number")
+
+
+@case("23.7 haptics test --seconds nan / --force nan are refused, no hang")
+def _(t):
+    t.run("haptics", "test", "--device", "emulated", "--seconds", "nan", timeout=20).fails_cleanly(r"finite")
+    t.run("haptics", "test", "--device", "emulated", "--force", "nan", timeout=20).fails_cleanly(r"finite")
+
+
+@case("23.7 a number with trailing garbage is refused")
+def _(t):
+    t.run("sim-hand", "--seconds", "3s", "--out", "x.prec").fails_cleanly(r"3s")
+
+
+# --- 23.18: seeds never wrap or clamp ---------------------------------------------------
+
+
+@case("23.18 --seed -1, 1e23, 0x10 and 2^64 are refused; 2^64-1 is a seed of its own")
+def _(t):
+    for bad in ("-1", "1e23", "0x10", "18446744073709551616", "1.5", "010 "):
+        t.run("sim-hand", "--seconds", "1", "--seed", bad, "--out", "x.prec").fails_cleanly(r"--seed")
+    assert not t.path("x.prec").exists()
+    t.run("sim-hand", "--seconds", "1", "--seed", "18446744073709551615", "--out", "max.prec").expect(rc=0)
+    t.run("sim-hand", "--seconds", "1", "--seed", "1", "--out", "one.prec").expect(rc=0)
+    assert t.path("max.prec").read_bytes() != t.path("one.prec").read_bytes(), "seed 2^64-1 gave seed 1's file"
+
+
+# --- 23.5: special files are refused, never read without bounds -------------------------
+
+
+@case("23.5 the layer config as /dev/zero: refused at once, bounded")
+def _(t):
+    r = t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": "/dev/zero"}, timeout=20, max_mb=1024)
+    r.expect(rc={1, 2}, out=r"is a character device")
+
+
+@case("23.5 the layer config as a FIFO: refused, no hang")
+def _(t):
+    fifo = t.fifo("layer.toml")
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(fifo)}, timeout=20).expect(rc={1, 2}, out=r"FIFO")
+
+
+@case("23.5 the layer config as a directory says so")
+def _(t):
+    os.mkdir(t.path("cfgdir"))
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.path("cfgdir"))}, timeout=20).expect(
+        rc={1, 2}, out=r"is a directory")
+
+
+@case("23.5 glove monitor --from-file /dev/zero and a FIFO are refused")
+def _(t):
+    t.run("glove", "monitor", "--from-file", "/dev/zero", timeout=20, max_mb=1024).fails_cleanly(r"character device")
+    fifo = t.fifo("cap.bin")
+    t.run("glove", "monitor", "--from-file", fifo, timeout=20).fails_cleanly(r"FIFO")
+
+
+@case("23.5 stretch-board monitor --from-file /dev/zero and a FIFO are refused")
+def _(t):
+    t.run("stretch-board", "monitor", "--from-file", "/dev/zero", timeout=20, max_mb=1024).fails_cleanly(
+        r"character device")
+    fifo = t.fifo("cap.bin")
+    t.run("stretch-board", "monitor", "--from-file", fifo, timeout=20).fails_cleanly(r"FIFO")
+
+
+@case("23.5 a glove description, layout or device model that is a FIFO or /dev/zero is refused")
+def _(t):
+    fifo = t.fifo("g.toml")
+    t.run("sim-vist", "--glove", fifo, "--seconds", "1", "--out", "s.prec", timeout=30).fails_cleanly(r"FIFO")
+    t.run("sim-vist", "--glove", "/dev/zero", "--seconds", "1", "--out", "s.prec", timeout=30).fails_cleanly(
+        r"character device")
+    t.run("haptics", "test", "--device", "emulated", "--model", fifo, timeout=30).fails_cleanly(r"FIFO")
+    t.run("calibrate", "glove", "--layout", fifo, "--out", "c.toml", timeout=30).fails_cleanly(r"FIFO")
+
+
+@case("23.5 a scene file that is a FIFO is refused")
+def _(t):
+    fifo = t.fifo("scene.toml")
+    t.run("run", fifo, "--headless", "--frames", "1", "--out", "f", timeout=30).fails_cleanly(r"FIFO")
+
+
+@case("23.5 a huge config file is refused with its size and the limit")
+def _(t):
+    p = t.path("big.toml")
+    with open(p, "wb") as f:
+        f.truncate(20 * 1024 * 1024)  # sparse: 20 MiB of zeros
+    t.run("haptics", "test", "--device", "emulated", "--model", p, timeout=30).fails_cleanly(r"too large.*limit")
+
+
+# --- 23.4: device paths that are not hidraw nodes ---------------------------------------
+
+
+@case("23.4 glove/stretch-board monitor --path /dev/null, /dev/zero, a file: clear error, no crash")
+def _(t):
+    t.write("plain", b"\0" * 64)
+    for cmd in (["glove", "monitor"], ["stretch-board", "monitor"]):
+        for p in ("/dev/null", "/dev/zero", str(t.path("plain")), str(t.path("missing"))):
+            t.run(*cmd, "--path", p, "--seconds", "1", timeout=30).expect(
+                rc=1, err=r"hidraw|does not exist")
+
+
+@case("23.4 haptics test --device /dev/null, /dev/zero: clear error, no crash")
+def _(t):
+    for p in ("/dev/null", "/dev/zero"):
+        t.run("haptics", "test", "--device", p, "--seconds", "1", timeout=30).expect(rc=1, err=r"hidraw")
+
+
+# --- 23.13: unknown keys are errors in every TOML file ----------------------------------
+
+
+@case("23.13 a scene with [[objects]] (for [[object]]) is refused with file:line")
+def _(t):
+    t.write("scene.toml", 'name = "s"\n[[objects]]\nname = "box"\nshape = "box"\n')
+    t.run("run", "scene.toml", "--headless", "--frames", "1", "--out", "f", timeout=60).fails_cleanly(
+        r"scene.toml:2:.*unknown key 'objects'")
+
+
+@case("23.13 a scene object with a typo'd key is refused")
+def _(t):
+    t.write("scene.toml", '[[object]]\nname = "box"\nshape = "box"\nposition = [0, 1, 0]\nmas = 2\n')
+    t.run("run", "scene.toml", "--headless", "--frames", "1", "--out", "f", timeout=60).fails_cleanly(
+        r"scene.toml:5:.*unknown key 'mas'")
+
+
+@case("23.13 the layer config with [[sources]] or a typo'd key: layer status is not OK")
+def _(t):
+    t.write("a.toml", '[[sources]]\ntype = "sim"\n')
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.path("a.toml"))}).expect(
+        rc={1, 2}, out=r"a.toml:1:.*unknown key 'sources'", no_err=r".")
+    t.write("b.toml", '[[source]]\ntype = "sim"\nsubjekt = 4\n')
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.path("b.toml"))}).expect(
+        rc={1, 2}, out=r"b.toml:3:.*unknown key 'subjekt'")
+    t.write("c.toml", '[layer]\nmax_prediction = 20\n')
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.path("c.toml"))}).expect(
+        rc={1, 2}, out=r"unknown key 'max_prediction'")
+
+
+# --- 23.15: the layer's readiness ---------------------------------------------------------
+
+
+def _replay_config(t, path):
+    t.write("layer.toml", f'[[source]]\ntype = "replay"\npath = "{path}"\n')
+    return {"PROPRIO_LAYER_CONFIG": str(t.path("layer.toml"))}
+
+
+@case("23.15 layer status: a missing, empty, FIFO or garbage replay file is a problem, not OK")
+def _(t):
+    t.write("empty.prec", b"")
+    t.write("junk.prec", b"not a recording at all\n" * 10)
+    fifo = t.fifo("fifo.prec")
+    for name, why in (("missing.prec", r"does not exist"), ("empty.prec", r"."), ("fifo.prec", r"FIFO"),
+                      ("junk.prec", r".")):
+        r = t.run("layer", "status", env=_replay_config(t, t.path(name)), timeout=20)
+        r.expect(out=r"Problem: \[\[source\]\] #1 \(replay\) cannot serve hands: .*" + why)
+        assert r.rc != 0, f"layer status exit 0 with a replay source {name}"
+    assert fifo.exists()
+
+
+@case("23.15 an offset that would make an invalid pose is refused in the config")
+def _(t):
+    t.write("layer.toml", '[[source]]\ntype = "sim"\noffset_position_m = [1e300, 0, 0]\n')
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.path("layer.toml"))}).expect(
+        rc={1, 2}, out=r"layer.toml:3:.*offset_position_m.*within")
+    t.write("layer.toml", '[[source]]\ntype = "sim"\noffset_rotation_deg = [nan, 0, 0]\n')
+    t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.path("layer.toml"))}).expect(
+        rc={1, 2}, out=r"finite")
+
+
+# --- 23.17: init-config with a bare file name -------------------------------------------
+
+
+@case("23.17 layer init-config --out NAME writes NAME in the current folder")
+def _(t):
+    t.run("layer", "init-config", "--out", "layer.toml").expect(rc=0)
+    assert t.path("layer.toml").is_file()
+    t.watch("layer.toml")
+    t.run("layer", "init-config", "--out", "layer.toml").fails_cleanly(r"already exists.*--force")
+
+
+@case("23.17 layer init-config --out a directory or a FIFO is refused, nothing lost")
+def _(t):
+    os.mkdir(t.path("d"))
+    t.run("layer", "init-config", "--out", "d", "--force").fails_cleanly(r"is a directory")
+    fifo = t.fifo("f")
+    t.run("layer", "init-config", "--out", fifo, "--force", timeout=20).fails_cleanly(r"FIFO")
+
+
+# --- 23.19: exit codes and messages -------------------------------------------------------
+
+
+@case("23.19 a bad option value exits 1 (documented), not CLI11's 105")
+def _(t):
+    t.run("sim-hand", "--seconds", "abc", "--out", "x.prec").expect(rc=1)
+    t.run("sim-hand", "--no-such-option").expect(rc=1)
+    t.run("sim-hand").expect(rc=1, err=r"--out")  # a required option is missing
+    t.run("--help").expect(rc=0, out=r"Exit status: 0 success; 1")
+
+
+@case("23.19 proprio --version ends with a newline")
+def _(t):
+    r = t.run("--version").expect(rc=0, out=r"^proprio \d")
+    assert r.out.endswith("\n"), repr(r.out)
+
+
+@case("23.19 a 100 kB option value is not echoed back whole")
+def _(t):
+    big = "9" * 100_000  # near the kernel's limit for one argument (128 KiB)
+    r = t.run("sim-hand", "--seconds", "1", "--seed", big, "--out", "x.prec").expect(rc=1)
+    assert len(r.err) < 4096, f"{len(r.err)} bytes of error output"
+
+
+@case("23.19 control characters in a file name do not reach the terminal raw")
+def _(t):
+    name = "evil\x1b[2J\x1b]0;pwned\x07.toml"
+    r = t.run("haptics", "test", "--device", "emulated", "--model", name, timeout=30).expect(rc=1)
+    assert "\x1b" not in r.err and "\x07" not in r.err, repr(r.err)

@@ -251,3 +251,31 @@ def _(t):
     name = "evil\x1b[2J\x1b]0;pwned\x07.toml"
     r = t.run("haptics", "test", "--device", "emulated", "--model", name, timeout=30).expect(rc=1)
     assert "\x1b" not in r.err and "\x07" not in r.err, repr(r.err)
+
+
+# --- 23.5 / 23.15: the layer inside an app ------------------------------------------------
+
+
+def _app_env(t, config):
+    t.need(bool(t.opts.mock_runtime_json) and os.path.exists(t.opts.mock_runtime_json), "no mock OpenXR runtime built")
+    t.need(bool(t.opts.layer_dir) and os.path.isdir(t.opts.layer_dir), "no OpenXR layer built")
+    return {"XR_RUNTIME_JSON": t.opts.mock_runtime_json, "XR_API_LAYER_PATH": t.opts.layer_dir,
+            "XR_ENABLE_API_LAYERS": "XR_APILAYER_PROPRIO_hand_tracking", "PROPRIO_LAYER_CONFIG": str(config)}
+
+
+@case("23.5 an app whose layer config is /dev/zero starts at once, bounded, and says why it has no hands")
+def _(t):
+    r = t.run("xr-probe", "--seconds", "1", env=_app_env(t, "/dev/zero"), timeout=30, max_mb=1536)
+    r.expect(err=r"character device")
+    assert r.seconds < 20, f"the app took {r.seconds:.1f} s"
+
+
+@case("23.5 an app whose layer config or replay file is a FIFO does not hang")
+def _(t):
+    fifo = t.fifo("layer.toml")
+    t.run("xr-probe", "--seconds", "1", env=_app_env(t, fifo), timeout=30).expect(err=r"FIFO")
+    rec = t.fifo("rec.prec")
+    t.write("replay.toml", f'[[source]]\ntype = "replay"\npath = "{rec}"\n')
+    t.run("xr-probe", "--seconds", "1", env=_app_env(t, t.path("replay.toml")), timeout=30).expect(err=r"FIFO")
+    vist = t.write("vist.toml", f'[[source]]\ntype = "vist"\npath = "{rec}"\n')
+    t.run("xr-probe", "--seconds", "1", env=_app_env(t, vist), timeout=30).expect(err=r"FIFO")

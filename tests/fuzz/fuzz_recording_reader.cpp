@@ -1,7 +1,10 @@
 // Fuzzes RecordingReader over arbitrary bytes. Any input must end in an Error
 // or a finite run of records, without crash, hang or outsized allocation, and
-// the summary must account for every byte. Seeds: corpus/recording_reader/
+// the summary must account for every byte. Each input is also read with its
+// CRCs repaired, and once more with its middle damaged, so the payload decoders
+// and the resynchronisation after damage both see every input. Seeds: corpus/recording_reader/
 // (regenerate with PROPRIO_REGEN_CORPUS=1, see tests/unit/test_recording.cpp).
+#include <algorithm>
 #include <cstdlib>
 #include <vector>
 
@@ -50,14 +53,28 @@ void check(std::span<const std::uint8_t> bytes) {
   }
   const RecordingSummary& s = reader->summary();
   if (s.end == RecordingEnd::reading || s.valid_bytes + s.ignored_bytes != bytes.size()) std::abort();
+  if (s.skipped_bytes > s.ignored_bytes || (s.corrupt_regions > 0) != (s.skipped_bytes > 0)) std::abort();
+  if (s.corrupt_regions > 0 && s.end != RecordingEnd::corrupt) std::abort();
   auto after = reader->next();
   if (!after || *after) std::abort();  // the end is sticky
+}
+
+// Damages the middle of an otherwise intact file (its first byte picks where
+// and how), so that the reader's resynchronisation runs on every input.
+std::vector<std::uint8_t> damaged_mid_file(std::vector<std::uint8_t> b) {
+  if (b.size() < 64) return b;
+  const std::size_t at = 20 + (b[0] * (b.size() - 40)) / 256;
+  const std::size_t n = 1 + b[1] % 48;
+  for (std::size_t i = at; i < std::min(b.size(), at + n); ++i) b[i] = static_cast<std::uint8_t>(b[i] ^ (0x5A + i));
+  return b;
 }
 
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   check({data, size});
-  check(with_valid_crcs(data, size));
+  const auto intact = with_valid_crcs(data, size);
+  check(intact);
+  check(damaged_mid_file(intact));
   return 0;
 }

@@ -6,6 +6,9 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <fstream>
+#include <functional>
+#include <random>
 
 namespace proprio {
 namespace {
@@ -54,14 +57,16 @@ struct StreamSpec {
   Vec3 shift = Vec3::Zero();
 };
 
-void write_recording(const fs::path& path, const std::vector<StreamSpec>& specs) {
+// time_of(k) gives sample k's time; by default the 100 Hz grid from kStart.
+void write_recording(const fs::path& path, const std::vector<StreamSpec>& specs, int samples = kSamples,
+                     const std::function<TimeNs(int)>& time_of = {}) {
   auto w = RecordingWriter::create(path, {.overwrite = true});
   ASSERT_TRUE(w.ok()) << w.error().message;
   const StreamId imu = w->add_stream(StreamKind::imu, "imu/0").value();
   std::vector<StreamId> ids;
   for (const auto& s : specs) ids.push_back(w->add_stream(StreamKind::hand_pose, s.name).value());
-  for (int k = 0; k < kSamples; ++k) {
-    const TimeNs t = kStart + k * kStep;
+  for (int k = 0; k < samples; ++k) {
+    const TimeNs t = time_of ? time_of(k) : kStart + k * kStep;
     ASSERT_TRUE(w->write(imu, ImuSample{}, t).ok());
     for (std::size_t i = 0; i < specs.size(); ++i) {
       ASSERT_TRUE(w->write(ids[i], analytic_pose(t, specs[i].hand, specs[i].shift)).ok());
@@ -226,6 +231,110 @@ TEST(ReplayHandSource, TruncatedRecordingReplaysItsCompleteRecordsAndMoves) {
   EXPECT_EQ(src.streams()[0].samples, static_cast<std::size_t>(kSamples - 1));
   EXPECT_EQ(src.file_time_range().last_ns, kStart + (kSamples - 2) * kStep);
   EXPECT_TRUE(src.pose_at(Handedness::right, kStart + 5 * kStep + 7).ok());
+}
+
+// Replay streams the file: what it holds stays within its options however
+// long the recording, and every lookup answers what a history holding the
+// whole file answers (interpolation, gaps, before and after the recording).
+TEST(ReplayHandSource, StreamsALongRecordingInBoundedMemoryWithTheSameAnswers) {
+  TempDir dir;
+  const fs::path path = dir / "long.prec";
+  constexpr int kLong = 3000;  // 30 s at 100 Hz, with a 0.5 s gap at 12 s
+  const auto time_of = [](int k) { return kStart + k * kStep + (k >= 1200 ? 500 * kNsPerMillisecond : 0); };
+  write_recording(path, {{"hand/right", Handedness::right}, {"hand/left", Handedness::left}}, kLong, time_of);
+
+  ReplayOptions o;
+  o.window_samples = 8;
+  o.max_index_entries = 16;
+  o.max_prediction_ns = 20 * kNsPerMillisecond;
+  auto src = ReplayHandSource::open(path, o);
+  ASSERT_TRUE(src.ok()) << src.error().message;
+  EXPECT_EQ(src->streams()[0].samples, static_cast<std::size_t>(kLong));
+
+  PoseHistoryOptions ho;
+  ho.capacity = kLong;
+  ho.max_prediction_ns = o.max_prediction_ns;
+  ho.max_interpolation_gap_ns = o.max_interpolation_gap_ns;
+  PoseHistory reference(ho);
+  for (int k = 0; k < kLong; ++k) ASSERT_TRUE(reference.push(analytic_pose(time_of(k), Handedness::right)).ok());
+
+  std::vector<TimeNs> times;
+  const TimeNs first = time_of(0), last = time_of(kLong - 1);
+  for (TimeNs t = first - kStep; t <= last + 5 * kStep; t += 13'888'889) times.push_back(t);  // 72 Hz, forward
+  std::mt19937_64 rng(7);
+  for (int i = 0; i < 400; ++i) times.push_back(first - kStep + static_cast<TimeNs>(rng() % (last - first + 3 * kStep)));
+  for (int k : {0, 1, 1199, 1200, kLong - 1}) times.push_back(time_of(k));  // exact samples, around the gap
+  times.push_back(time_of(1199) + 100 * kNsPerMillisecond);  // inside the gap
+
+  std::size_t usable = 0;
+  for (const TimeNs t : times) {
+    SCOPED_TRACE("file time " + std::to_string(t));
+    HandPose got, want;
+    const PoseLookup r = src->lookup(Handedness::right, t, got);
+    ASSERT_EQ(r, reference.lookup(t, want));
+    if (is_usable(r)) {
+      ++usable;
+      EXPECT_EQ(got.joint(HandJoint::wrist).p, want.joint(HandJoint::wrist).p);
+      EXPECT_EQ(got.joint(HandJoint::index_tip).q.coeffs(), want.joint(HandJoint::index_tip).q.coeffs());
+    }
+    HandPose left;
+    EXPECT_EQ(src->lookup(Handedness::left, t, left), r);
+    EXPECT_LE(src->buffered_samples(), 2 * o.window_samples);
+    EXPECT_LE(src->index_entries(), 2 * o.max_index_entries);
+  }
+  EXPECT_GT(usable, times.size() / 2);
+  EXPECT_FALSE(src->read_failed());
+}
+
+TEST(ReplayHandSource, AnIsolatedFarFutureStampCostsOnePose) {
+  TempDir dir;
+  const fs::path path = dir / "stamp.prec";
+  // Pose 50 carries a CLOCK_REALTIME stamp: it used to end the replay there.
+  write_recording(path, {{"hand/right", Handedness::right}}, kSamples,
+                  [](int k) { return k == 50 ? TimeNs{1'700'000'000'000'000'000} : kStart + k * kStep; });
+  auto src = ReplayHandSource::open(path);
+  ASSERT_TRUE(src.ok()) << src.error().message;
+  EXPECT_EQ(src->skipped_samples(), 1u);
+  EXPECT_EQ(src->streams()[0].samples, static_cast<std::size_t>(kSamples - 1));
+  EXPECT_EQ(src->file_time_range().last_ns, kStart + (kSamples - 1) * kStep);
+  EXPECT_TRUE(src->pose_at(Handedness::right, kStart + 80 * kStep).ok());
+  auto check = check_replay_file(path);
+  ASSERT_TRUE(check.ok());
+  EXPECT_TRUE(check->damaged);
+  EXPECT_NE(check->problem.find("1 hand poses out of time order"), std::string::npos) << check->problem;
+}
+
+TEST(ReplayHandSource, CheckReplayFileSaysWhatIsWrong) {
+  TempDir dir;
+  const fs::path good = dir / "good.prec";
+  write_recording(good, {{"hand/right", Handedness::right}});
+  auto ok = check_replay_file(good);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_FALSE(ok->damaged);
+  EXPECT_EQ(ok->problem, "");
+
+  const fs::path cut = dir / "cut.prec";
+  fs::copy_file(good, cut);
+  fs::resize_file(cut, fs::file_size(cut) - 1000);
+  auto truncated = check_replay_file(cut);
+  ASSERT_TRUE(truncated.ok());
+  EXPECT_TRUE(truncated->damaged);
+  EXPECT_NE(truncated->problem.find("cut short"), std::string::npos) << truncated->problem;
+
+  // A flipped byte mid-file: the rest still plays, and the check says so.
+  const fs::path bad = dir / "bad.prec";
+  fs::copy_file(good, bad);
+  {
+    std::fstream f(bad, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(static_cast<std::streamoff>(fs::file_size(bad) / 2));
+    f.put('\x55');
+  }
+  auto corrupt = check_replay_file(bad);
+  ASSERT_TRUE(corrupt.ok()) << corrupt.error().message;
+  EXPECT_TRUE(corrupt->damaged);
+  EXPECT_EQ(corrupt->summary.end, RecordingEnd::corrupt);
+  EXPECT_NE(corrupt->problem.find("damaged"), std::string::npos) << corrupt->problem;
+  EXPECT_GE(corrupt->streams.at(0).samples, static_cast<std::size_t>(kSamples - 2));
 }
 
 }  // namespace

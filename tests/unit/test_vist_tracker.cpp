@@ -118,6 +118,27 @@ TEST_F(VistTrackerInput, CountsAndDropsBadImuSamples) {
   EXPECT_FALSE(t.pose().active);
 }
 
+// One far-future stamp (a CLOCK_REALTIME time from another writer) used to
+// make every later sample of that IMU "out of order": fusion silently stopped.
+TEST_F(VistTrackerInput, AnIsolatedFarFutureStampCostsOneSample) {
+  auto& t = *tracker_;
+  constexpr TimeNs kStep = 10'000'000;
+  for (TimeNs i = 1; i <= 5; ++i) t.add_imu(sample(i * kStep, 0));
+  t.add_imu(sample(1'700'000'000'000'000'000, 0));
+  for (TimeNs i = 6; i <= 20; ++i) t.add_imu(sample(i * kStep, 0));
+  const auto& s = t.stats();
+  EXPECT_EQ(s.imu_rejected_time_jump, 1u);
+  EXPECT_EQ(s.imu_rejected_out_of_order, 0u);
+  EXPECT_EQ(t.newest_imu_time_ns(), 20 * kStep);
+  EXPECT_NE(s.describe().find("1 time jumps"), std::string::npos) << s.describe();
+
+  // A real pause is kept: the next sample confirms the new timeline.
+  t.add_imu(sample(100 * kNsPerSecond, 0));
+  t.add_imu(sample(100 * kNsPerSecond + kStep, 0));
+  EXPECT_EQ(t.newest_imu_time_ns(), 100 * kNsPerSecond + kStep);
+  EXPECT_EQ(s.imu_rejected_time_jump, 1u);
+}
+
 TEST_F(VistTrackerInput, CountsDuplicateFramesAndWaitsForImuBeforeAcquiring) {
   auto& t = *tracker_;
   MarkerObservations left, right;

@@ -1,6 +1,7 @@
 // proprio replay: read a recording back, say what is in it and whether it is
 // intact, and play its hand poses through the replay HandSource.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -10,6 +11,7 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/core/recording.hpp"
@@ -59,7 +61,7 @@ std::optional<nlohmann::json> parse_meta(const std::string& meta) {
 std::string describe_record(const RecordingReader& reader, const Record& r) {
   const StreamInfo* s = reader.stream(r.stream);
   char head[128];
-  std::snprintf(head, sizeof head, "%12.6f s  %-36s ", ns_to_seconds(r.time_ns), s ? s->name.c_str() : "?");
+  std::snprintf(head, sizeof head, "%12.6f s  %-36s ", ns_to_seconds(r.time_ns), s ? printable(s->name, 60).c_str() : "?");
   std::string body = std::visit(
       [](const auto& p) -> std::string {
         using T = std::decay_t<decltype(p)>;
@@ -74,7 +76,7 @@ std::string describe_record(const RecordingReader& reader, const Record& r) {
           std::snprintf(buf, sizeof buf, "at (%.3f, %.3f, %.3f) m", p.T_world_body.p.x(), p.T_world_body.p.y(),
                         p.T_world_body.p.z());
         } else if constexpr (std::is_same_v<T, Event>) {
-          return "\"" + p.text + "\"";
+          return "\"" + printable(p.text) + "\"";
         } else if constexpr (std::is_same_v<T, ImuSample>) {
           std::snprintf(buf, sizeof buf, "IMU %u accel (%.2f, %.2f, %.2f) m/s2", p.sensor_id, p.accel_mps2.x(),
                         p.accel_mps2.y(), p.accel_mps2.z());
@@ -91,6 +93,26 @@ std::string describe_record(const RecordingReader& reader, const Record& r) {
   return head + body;
 }
 
+// Keeps a plot series bounded on long recordings: past kMaxPoints it drops
+// every other point and from then on keeps every second one (and so on).
+struct Thinning {
+  std::uint64_t seen = 0;
+  unsigned shift = 0;
+};
+void append_thinned(PlotSeries& s, Thinning& th, double x, double y) {
+  constexpr std::size_t kMaxPoints = 20000;
+  const std::uint64_t keep_every = std::uint64_t{1} << th.shift;
+  if (th.seen++ % keep_every != 0) return;
+  s.x.push_back(x);
+  s.y.push_back(y);
+  if (s.x.size() < kMaxPoints) return;
+  std::size_t w = 0;
+  for (std::size_t r = 0; r < s.x.size(); r += 2, ++w) s.x[w] = s.x[r], s.y[w] = s.y[r];
+  s.x.resize(w);
+  s.y.resize(w);
+  ++th.shift;
+}
+
 int run_replay(const ReplayArgs& a) {
   auto reader = RecordingReader::open(a.file);
   if (!reader) return logger().error("{}", reader.error().message), 1;
@@ -100,6 +122,9 @@ int run_replay(const ReplayArgs& a) {
   std::map<StreamId, AngleStats> angles;
   std::uint64_t rejected = 0;
   std::size_t printed = 0;
+  const bool plotting = !a.plot.empty();
+  std::array<Thinning, 3> wrist_thinning{};
+  std::array<Thinning, 4> finger_thinning{};
 
   // Plot data (write_svg_plot thins long series).
   PlotPanel finger_panel{"Index finger and thumb joint angles (ground truth)", "deg", {}};
@@ -108,12 +133,13 @@ int run_replay(const ReplayArgs& a) {
   for (const char* d : plotted_dofs) finger_panel.series.push_back({d, {}, {}});
   for (const char* axis : {"wrist x", "wrist y", "wrist z"}) wrist_panel.series.push_back({axis, {}, {}});
 
+  // A damaged file can reject thousands of records: show the first few, count the rest.
+  constexpr std::uint64_t kShownWarnings = 5;
   ProgressBar progress("replay", 1.0, "of file");
   while (true) {
     auto next = reader->next();
     if (!next) {
-      ++rejected;
-      logger().warn("{}", next.error().message);
+      if (++rejected <= kShownWarnings) logger().warn("{}", printable(next.error().message, 400));
       continue;
     }
     if (!next->has_value()) break;
@@ -140,9 +166,9 @@ int run_replay(const ReplayArgs& a) {
       if (h.last_wrist) h.wrist_path_m += (wrist - *h.last_wrist).norm();
       h.last_wrist = wrist;
       if (pose->has_velocity) h.tip_speed_sum += pose->linear_velocity_in_world[index_of(HandJoint::index_tip)].norm();
-      for (int i = 0; i < 3; ++i) {
-        wrist_panel.series[static_cast<std::size_t>(i)].x.push_back(ns_to_seconds(r.time_ns));
-        wrist_panel.series[static_cast<std::size_t>(i)].y.push_back(wrist[i]);
+      for (int i = 0; i < 3 && plotting; ++i) {
+        const auto k = static_cast<std::size_t>(i);
+        append_thinned(wrist_panel.series[k], wrist_thinning[k], ns_to_seconds(r.time_ns), wrist[i]);
       }
       ++h.poses;
       h.last_pose = *pose;
@@ -159,12 +185,12 @@ int run_replay(const ReplayArgs& a) {
         as.min[i] = std::min(as.min[i], ja->angles_rad[i]);
         as.max[i] = std::max(as.max[i], ja->angles_rad[i]);
       }
-      for (auto& series : finger_panel.series) {
+      for (std::size_t f = 0; f < finger_panel.series.size(); ++f) {
+        PlotSeries& series = finger_panel.series[f];
         const auto it = std::find(as.dof_names.begin(), as.dof_names.end(), series.label);
         const auto i = static_cast<std::size_t>(it - as.dof_names.begin());
-        if (i < ja->angles_rad.size()) {
-          series.x.push_back(ns_to_seconds(r.time_ns));
-          series.y.push_back(rad_to_deg(ja->angles_rad[i]));
+        if (i < ja->angles_rad.size() && plotting) {
+          append_thinned(series, finger_thinning[f], ns_to_seconds(r.time_ns), rad_to_deg(ja->angles_rad[i]));
         }
       }
       // Recorded angles against IK of the pose recorded at the same instant:
@@ -189,24 +215,31 @@ int run_replay(const ReplayArgs& a) {
   const RecordingSummary& sum = reader->summary();
   TimeNs t0 = INT64_MAX, t1 = INT64_MIN;
   for (const auto& [id, st] : stats) t0 = std::min(t0, st.first), t1 = std::max(t1, st.last);
-  const double span = stats.empty() ? 0.0 : ns_to_seconds(t1 - t0);
-  std::printf("Recording %s (format %u.%u): %zu streams, %llu records, %.2f s\n", a.file.c_str(), reader->format_major(),
-              reader->format_minor(), reader->streams().size(), static_cast<unsigned long long>(sum.records), span);
-  std::printf("Integrity: %s%s%s\n", to_string(sum.end), sum.detail.empty() ? "" : ": ", sum.detail.c_str());
-  if (rejected) std::printf("  %llu records were rejected (see warnings above)\n", static_cast<unsigned long long>(rejected));
+  // In double: time stamps from a damaged or foreign file can be anything.
+  const double span = stats.empty() ? 0.0 : 1e-9 * (static_cast<double>(t1) - static_cast<double>(t0));
+  std::printf("Recording %s (format %u.%u): %zu streams, %llu records, %.2f s\n", printable(a.file, 300).c_str(),
+              reader->format_major(), reader->format_minor(), reader->streams().size(),
+              static_cast<unsigned long long>(sum.records), span);
+  std::printf("Integrity: %s%s%s\n", to_string(sum.end), sum.detail.empty() ? "" : ": ",
+              printable(sum.detail, 1000).c_str());
+  if (rejected) {
+    std::printf("  %llu records were rejected (the first %llu are shown in the warnings above)\n",
+                static_cast<unsigned long long>(rejected),
+                static_cast<unsigned long long>(std::min(rejected, kShownWarnings)));
+  }
   std::printf("\n  %-38s %-13s %9s %10s  %s\n", "stream", "kind", "records", "rate", "span");
   for (const auto& s : reader->streams()) {
     const StreamStats st = stats.count(s.id) ? stats[s.id] : StreamStats{};
-    const double dur = ns_to_seconds(st.last - st.first);
+    const double dur = 1e-9 * (static_cast<double>(st.last) - static_cast<double>(st.first));
     char rate[32] = "-";
     if (st.count > 1 && dur > 0) std::snprintf(rate, sizeof rate, "%.1f Hz", static_cast<double>(st.count - 1) / dur);
-    std::printf("  %-38s %-13s %9llu %10s  %.3f-%.3f s\n", s.name.c_str(), std::string(to_string(s.kind)).c_str(),
+    std::printf("  %-38s %-13s %9llu %10s  %.3f-%.3f s\n", printable(s.name, 60).c_str(), std::string(to_string(s.kind)).c_str(),
                 static_cast<unsigned long long>(st.count), rate, ns_to_seconds(st.first), ns_to_seconds(st.last));
   }
 
   for (const auto& [id, h] : hands) {
     const StreamInfo* info = reader->stream(id);
-    std::printf("\nHand motion in %s: %llu poses, wrist path %.2f m", info ? info->name.c_str() : "?",
+    std::printf("\nHand motion in %s: %llu poses, wrist path %.2f m", info ? printable(info->name, 60).c_str() : "?",
                 static_cast<unsigned long long>(h.poses), h.wrist_path_m);
     if (h.poses > 0 && h.tip_speed_sum > 0) std::printf(", mean index-tip speed %.3f m/s", h.tip_speed_sum / static_cast<double>(h.poses));
     std::printf("\n");
@@ -217,9 +250,9 @@ int run_replay(const ReplayArgs& a) {
     }
   }
   for (const auto& [id, as] : angles) {
-    std::printf("\nJoint ranges in %s (deg):\n", reader->stream(id)->name.c_str());
+    std::printf("\nJoint ranges in %s (deg):\n", printable(reader->stream(id)->name, 60).c_str());
     for (std::size_t i = 0; i < as.min.size(); ++i) {
-      const std::string name = i < as.dof_names.size() ? as.dof_names[i] : "dof " + std::to_string(i);
+      const std::string name = i < as.dof_names.size() ? printable(as.dof_names[i], 40) : "dof " + std::to_string(i);
       std::printf("  %-22s %7.1f .. %6.1f%s", name.c_str(), rad_to_deg(as.min[i]), rad_to_deg(as.max[i]),
                   (i % 2 == 1 || i + 1 == as.min.size()) ? "\n" : "   ");
     }
@@ -228,14 +261,31 @@ int run_replay(const ReplayArgs& a) {
   if (!hands.empty()) {
     auto source = ReplayHandSource::open(a.file);
     if (!source) {
-      std::printf("\nReplay source: %s\n", source.error().message.c_str());
+      std::printf("\nReplay source: %s\n", printable(source.error().message, 1000).c_str());
     } else {
       const auto range = source->file_time_range();
-      const auto step = seconds_to_ns(1.0 / a.replay_rate_hz);
+      // Query at the replay rate, but never more than kMaxQueries times per
+      // hand: a file spanning years (a wall-clock stamp from a foreign
+      // writer) is sampled more coarsely, and says so, rather than hanging.
+      constexpr double kMaxQueries = 2e6;
+      const double span_ns = static_cast<double>(range.last_ns) - static_cast<double>(range.first_ns);
+      double step_ns = 1e9 / a.replay_rate_hz;
+      const bool thinned = span_ns / step_ns + 1.0 > kMaxQueries;
+      if (thinned) step_ns = span_ns / (kMaxQueries - 1.0);
+      const auto queries = static_cast<std::uint64_t>(span_ns / step_ns) + 1;
       std::uint64_t served = 0, refused = 0;
       std::string first_refusal;
+      if (source->skipped_samples() > 0) {
+        std::printf("\nReplay source: %zu hand poses left out (out of time order, or isolated time jumps)\n",
+                    source->skipped_samples());
+      }
+      if (thinned) {
+        std::printf("\nThe hand poses span %.3g s: querying %.0f times at %.3g s intervals instead of at %.0f Hz\n",
+                    span_ns * 1e-9, kMaxQueries, step_ns * 1e-9, a.replay_rate_hz);
+      }
       for (const auto& s : source->streams()) {
-        for (TimeNs t = range.first_ns; t <= range.last_ns; t += step) {
+        for (std::uint64_t i = 0; i < queries; ++i) {
+          const TimeNs t = std::min(range.last_ns, range.first_ns + static_cast<TimeNs>(static_cast<double>(i) * step_ns));
           auto p = source->pose_at(s.hand, t);
           if (p && p->fully_valid()) {
             ++served;
@@ -247,7 +297,8 @@ int run_replay(const ReplayArgs& a) {
       }
       std::printf("\nReplayed through the replay HandSource at %.0f Hz: %llu poses served, %llu refused%s%s\n",
                   a.replay_rate_hz, static_cast<unsigned long long>(served), static_cast<unsigned long long>(refused),
-                  first_refusal.empty() ? "" : " (first: ", first_refusal.empty() ? "" : (first_refusal + ")").c_str());
+                  first_refusal.empty() ? "" : " (first: ",
+                  first_refusal.empty() ? "" : (printable(first_refusal, 400) + ")").c_str());
     }
   }
 
@@ -260,7 +311,7 @@ int run_replay(const ReplayArgs& a) {
     } else if (auto s = write_svg_plot(a.plot, a.file, "time (s)", panels); !s) {
       return logger().error("{}", s.error().message), 1;
     } else {
-      std::printf("\nPlot written to %s (open it in a browser)\n", a.plot.c_str());
+      std::printf("\nPlot written to %s (open it in a browser)\n", printable(a.plot, 300).c_str());
     }
   }
   return sum.end == RecordingEnd::clean || sum.end == RecordingEnd::missing_end || sum.end == RecordingEnd::truncated ? 0 : 3;

@@ -28,9 +28,9 @@ struct SimHandArgs {
 
 int run_sim_hand(const SimHandArgs& a) {
   auto subject = sim::sim_subject(a.subject);
-  if (!subject) return logger().error("{}", subject.error().message), 2;
+  if (!subject) return logger().error("{}", subject.error().message), 1;
   auto shape = subject->shape();
-  if (!shape) return logger().error("{}", shape.error().message), 2;
+  if (!shape) return logger().error("{}", shape.error().message), 1;
 
   sim::HandMotionOptions options;
   options.protocol = *sim::parse_motion_protocol(a.protocol);  // CLI11 already checked the name

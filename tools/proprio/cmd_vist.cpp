@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "proprio/core/file_io.hpp"
 #include "progress.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/devices/glove_device.hpp"
@@ -85,7 +86,7 @@ int run_bench_vist(const BenchVistArgs& a) {
   GloveDescription glove = GloveDescription::vist_default();
   if (!a.glove.empty()) {
     auto g = GloveDescription::load(a.glove);
-    if (!g) return logger().error("{}", g.error().message), 2;
+    if (!g) return logger().error("{}", g.error().message), 1;
     glove = std::move(*g);
   }
   std::vector<Case> cases;
@@ -210,10 +211,7 @@ Result<GloveDescription> load_glove(const std::string& path) {
 
 int run_sim_vist(const SimVistArgs& a) {
   auto glove = load_glove(a.glove);
-  if (!glove) {
-    std::fprintf(stderr, "error: %s\n", glove.error().message.c_str());
-    return 2;
-  }
+  if (!glove) return report_error(glove.error());
   vist_eval::SessionSpec spec;
   spec.subject = a.subject;
   spec.duration_s = a.seconds;
@@ -372,28 +370,54 @@ int run_track_vist(const TrackVistArgs& a) {
     j["all_joints"] = to_json(r->all_joints);
     j["keypoint_mean_mm"] = r->keypoint_mean_mm;
   }
+  // Damaged data is reported, never passed off as a complete session.
+  const bool corrupt = r->recording.end == RecordingEnd::corrupt;
+  const int exit_status = corrupt ? 3 : 0;
+  j["recording_detail"] = printable(r->recording.detail, 1000);
+  j["corrupt_regions"] = r->recording.corrupt_regions;
+  j["skipped_bytes"] = r->recording.skipped_bytes;
+  j["lost_records"] = r->recording.lost_records;
+  j["imu_rejected_out_of_order"] = r->stats.imu_rejected_out_of_order;
+  j["imu_rejected_time_jump"] = r->stats.imu_rejected_time_jump;
   if (a.json) {
     std::printf("%s\n", j.dump(2).c_str());
-    return 0;
+    if (corrupt) std::fprintf(stderr, "error: %s\n", printable(r->recording.detail, 1000).c_str());
+    return exit_status;
   }
   std::printf("%s: %.1f s, %llu IMU samples, %llu stereo frames (%llu fused), %llu poses, %.0fx real time\n",
               a.session.c_str(), r->session_seconds, static_cast<unsigned long long>(r->imu_samples),
               static_cast<unsigned long long>(r->stereo_frames), static_cast<unsigned long long>(r->stats.frames_fused),
               static_cast<unsigned long long>(r->poses), rt);
   if (r->recording.end != RecordingEnd::clean || r->skipped_records > 0) {
-    std::printf("recording: %s, %llu damaged records skipped (%s)\n", to_string(r->recording.end),
-                static_cast<unsigned long long>(r->skipped_records), r->recording.detail.c_str());
+    std::printf("recording: %s, %llu records with bad content skipped (%s)\n", to_string(r->recording.end),
+                static_cast<unsigned long long>(r->skipped_records), printable(r->recording.detail, 1000).c_str());
+  }
+  if (r->stats.imu_rejected_out_of_order > 0 || r->stats.imu_rejected_time_jump > 0) {
+    std::printf("IMU samples rejected for their time stamps: %llu out of order, %llu isolated time jumps\n",
+                static_cast<unsigned long long>(r->stats.imu_rejected_out_of_order),
+                static_cast<unsigned long long>(r->stats.imu_rejected_time_jump));
   }
   if (r->scored) {
     std::printf("vs ground truth (after %.0f s): keypoints mean %.2f mm, p95 %.2f mm, PCK@20 %.1f%%; all 26 joints "
                 "%.2f mm\n",
                 a.warmup_s, r->keypoints.mean_mm, r->keypoints.p95_mm, 100 * r->keypoints.pck20,
                 r->all_joints.mean_mm);
+  } else if (r->ground_truth_poses == 0) {
+    std::printf(corrupt ? "no ground truth could be read from the damaged session: nothing to score\n"
+                        : "no ground truth in the session: nothing to score\n");
   } else {
-    std::printf("no ground truth in the session: nothing to score\n");
+    std::printf("the session's %llu ground-truth poses do not cover the tracker's output (after the %.0f s "
+                "warm-up): nothing to score\n",
+                static_cast<unsigned long long>(r->ground_truth_poses), a.warmup_s);
   }
-  if (!a.out.empty()) std::printf("tracked hand written to %s (proprio replay %s --summary)\n", a.out.c_str(), a.out.c_str());
-  return 0;
+  if (!a.out.empty()) {
+    std::printf("tracked hand written to %s (proprio replay %s --summary)\n", printable(a.out, 300).c_str(),
+                printable(a.out, 300).c_str());
+  }
+  if (corrupt) {
+    std::fprintf(stderr, "error: the session recording is damaged: %s\n", printable(r->recording.detail, 1000).c_str());
+  }
+  return exit_status;
 }
 
 const std::vector<std::string> kChallengeNames = {"none", "occlude_half", "out_of_view", "distractors",
@@ -429,6 +453,7 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
       "vist",
       "Replay a recorded VIST session (from 'proprio sim-vist' or a live VIST source) through the tracker,\n"
       "in the order the data arrived; score it against the session's ground truth when it has one.\n"
+      "Exit status: 0 done, 1 cannot read or track, 3 the recording is damaged (results cover what could be read).\n"
       "With --live: track a real glove (IMU board over USB HID) seen by a stereo camera.");
   auto* session = tv->add_option("--session", targs->session, "VIST session recording")->check(CLI::ExistingFile);
   auto* live = tv->add_flag("--live", targs->live,

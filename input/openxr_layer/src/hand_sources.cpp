@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "proprio/core/log.hpp"
 #include "proprio/core/replay_source.hpp"
 #include "proprio/devices/hid_transport.hpp"
 #include "proprio/glove/glove_board_source.hpp"
@@ -32,6 +33,12 @@ Result<std::unique_ptr<HandSource>> start_replay(const SourceConfig& sc, Duratio
   o.max_prediction_ns = max_prediction_ns;
   auto s = ReplayHandSource::open(sc.path, o);
   if (!s) return s.error();
+  // A damaged or cut-short file still plays what could be read; say so once.
+  if (const std::string problem =
+          describe_replay_problem(sc.path, s->recording_summary(), s->skipped_samples());
+      !problem.empty()) {
+    logger().warn("Proprio layer: {}", problem);
+  }
   // Play from now: the recording's first pose maps to this instant.
   s->set_time_offset_ns(MonotonicClock::instance().now_ns() - s->file_time_range().first_ns);
   return std::unique_ptr<HandSource>(std::make_unique<ReplayHandSource>(std::move(*s)));

@@ -1,5 +1,8 @@
 #include "proprio/vist/vist_hand_source.hpp"
 
+#include "proprio/core/file_io.hpp"
+#include "proprio/core/replay_source.hpp"
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -192,7 +195,9 @@ void VistSessionPlayer::run() {
   // loop starts 1 s after the previous one ended, so times keep increasing.
   const TimeNs start_ns = clock_.now_ns();
   TimeNs offset_ns = 0;
-  std::optional<TimeNs> first_ns;
+  // A plain value and a flag: GCC 12 warns (falsely) about an optional read in the lambda below.
+  TimeNs first_ns = 0;
+  bool have_first = false;
   TimeNs last_shifted_ns = start_ns;
   auto wait_until = [&](TimeNs target_ns) {
     if (options_.speed == 0.0) {
@@ -207,10 +212,17 @@ void VistSessionPlayer::run() {
   for (;;) {
     auto item = reader_->next();
     if (!item) {
-      logger().warn("VIST session player: {}: {}", path_.string(), item.error().message);
+      logger().warn("VIST session player: {}: {}", printable(path_.string(), 300), printable(item.error().message, 400));
       continue;
     }
     if (!*item) {
+      // Known only once the file has been read: a damaged or cut-short session, said once.
+      if (loops_.load() == 0) {
+        if (const std::string problem = describe_replay_problem(path_.string(), reader_->summary(), 0);
+            !problem.empty()) {
+          logger().warn("VIST session player: {}", problem);
+        }
+      }
       if (!options_.loop) break;
       auto reopened = VistSessionReader::open(path_);
       if (!reopened) {
@@ -220,17 +232,18 @@ void VistSessionPlayer::run() {
       }
       reader_.emplace(std::move(*reopened));
       loops_.fetch_add(1);
-      first_ns.reset();
+      have_first = false;
       continue;
     }
     auto shift = [&](TimeNs t) {
-      if (!first_ns) {
+      if (!have_first) {
+        have_first = true;
         first_ns = t;
         offset_ns = (loops_.load() == 0 ? start_ns : last_shifted_ns + kNsPerSecond) - t;
       }
       const double speed = options_.speed == 0.0 ? 1.0 : options_.speed;
-      const TimeNs shifted = *first_ns + offset_ns +
-                             static_cast<TimeNs>(std::llround(static_cast<double>(t - *first_ns) / speed));
+      const TimeNs shifted = first_ns + offset_ns +
+                             static_cast<TimeNs>(std::llround(static_cast<double>(t - first_ns) / speed));
       last_shifted_ns = std::max(last_shifted_ns, shifted);
       return shifted;
     };

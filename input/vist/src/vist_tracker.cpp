@@ -32,6 +32,9 @@ Status VistTrackerOptions::validate() const {
   if (!(max_frame_latency_s > 0.0 && max_frame_latency_s <= 2.0)) {
     return make_error(Errc::invalid_argument, "VIST tracker: max_frame_latency_s must be in (0, 2] s");
   }
+  if (!(max_imu_time_jump_s > 0.0 && max_imu_time_jump_s <= 1e6)) {
+    return make_error(Errc::invalid_argument, "VIST tracker: max_imu_time_jump_s must be in (0, 1e6] s");
+  }
   if (min_acquisition_points < 3 || min_acquisition_matches < 3) {
     return make_error(Errc::invalid_argument, "VIST tracker: acquisition needs at least 3 points and 3 matches");
   }
@@ -65,7 +68,7 @@ std::string VistStats::describe() const {
   std::ostringstream s;
   s << "imu samples " << imu_samples << " (rejected: " << imu_rejected_non_finite << " non-finite, "
     << imu_rejected_saturated << " saturated, " << imu_rejected_out_of_order << " out of order, "
-    << imu_rejected_unknown_sensor << " unknown sensor); frames " << frames << " (fused " << frames_fused
+    << imu_rejected_unknown_sensor << " unknown sensor, " << imu_rejected_time_jump << " time jumps); frames " << frames << " (fused " << frames_fused
     << ", late " << frames_late << ", duplicate " << frames_duplicate << ", before acquisition "
     << frames_before_init << "); acquisitions " << acquisitions << ", re-acquisitions " << reacquisitions
     << "; stereo points " << stereo_points << ", correspondences " << correspondences << ", markers fused "
@@ -125,6 +128,8 @@ VistTracker::VistTracker(const GloveDescription& glove, VistTrackerOptions optio
   segment_of_sensor_.assign(static_cast<std::size_t>(max_sensor) + 1, -1);
   for (std::size_t k = 0; k < n; ++k) segment_of_sensor_[m.segments[k].imu_sensor_id] = static_cast<int>(k);
   last_sample_ns_.assign(n, std::numeric_limits<TimeNs>::min());
+  imu_time_guards_.assign(n, TimestampGuard(static_cast<DurationNs>(options_.max_imu_time_jump_s * 1e9)));
+  imu_held_.assign(n, TimedImuSample{});
   last_gyro_.assign(n, Vec3::Zero());
   last_accel_.assign(n, Vec3::Zero());
   queue_.reserve(n * 200);
@@ -166,10 +171,30 @@ bool VistTracker::add_imu(const TimedImuSample& s) {
     ++stats_.imu_rejected_saturated;
     return false;
   }
-  if (s.time_ns <= last_sample_ns_[ks]) {
-    ++stats_.imu_rejected_out_of_order;
-    return false;
+  TimestampGuard& guard = imu_time_guards_[ks];
+  if (!guard.last_accepted_ns() && !guard.holding()) {
+    // An IMU's first sample is taken as it comes: the tracker cannot wait.
+    guard.reset(s.time_ns);
+    return accept_imu(ks, s);
   }
+  const TimestampGuard::Step step = guard.check(s.time_ns);
+  bool fresh = false;
+  if (step.reject_held) ++stats_.imu_rejected_time_jump;
+  if (step.release_held) fresh = accept_imu(ks, imu_held_[ks]);
+  if (step.hold) {
+    imu_held_[ks] = s;
+    return fresh;
+  }
+  if (!step.accept) {
+    ++stats_.imu_rejected_out_of_order;
+    return fresh;
+  }
+  return accept_imu(ks, s) || fresh;
+}
+
+bool VistTracker::accept_imu(std::size_t ks, const TimedImuSample& s) {
+  const Vec3& a = s.sample.accel_mps2;
+  const Vec3& w = s.sample.gyro_radps;
   last_sample_ns_[ks] = s.time_ns;
   last_gyro_[ks] = w;
   last_accel_[ks] = a;

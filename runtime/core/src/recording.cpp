@@ -1,5 +1,7 @@
 #include "proprio/core/recording.hpp"
 
+#include "proprio/core/file_io.hpp"
+
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -574,16 +576,18 @@ RecordingWriter::~RecordingWriter() {
 
 Result<RecordingWriter> RecordingWriter::create(const std::filesystem::path& path, RecordingWriterOptions options) {
   return no_throw([&]() -> Result<RecordingWriter> {
+    // Never over a file this process reads (its input recording, through any
+    // path or link), a FIFO or a device.
+    if (auto s = check_output_path(path, "recording"); !s) return s.error();
     errno = 0;
     // "x" (C11) opens with O_EXCL, so two recorders cannot race onto one file.
     FilePtr file(std::fopen(path.c_str(), options.overwrite ? "wb" : "wbx"));
     if (!file) {
       const int err = errno;
       if (err == EEXIST) {
-        return make_error(Errc::invalid_argument,
-                          "recording '" + path.string() +
-                              "' already exists; choose a new file name, delete the old file, or set "
-                              "RecordingWriterOptions::overwrite");
+        return make_error(Errc::invalid_argument, "recording '" + printable(path.string(), 300) +
+                                                      "' already exists; choose another file name, delete it, or "
+                                                      "pass --force to replace it");
       }
       return make_error(err == ENOENT ? Errc::not_found : Errc::io_error,
                         "cannot create recording '" + path.string() + "': " + std::strerror(err) +
@@ -713,14 +717,77 @@ struct RecordingReader::Impl {
   std::vector<std::int32_t> index_of_id;  // stream id -> index into streams, -1 if undefined
   RecordingSummary summary;
   std::vector<std::uint8_t> buf;
+  std::vector<std::uint8_t> scan;  // resynchronisation window
   bool done = false;
+  std::uint64_t file_pos = 0;      // where the FILE* stands; reads are sequential except after damage or seek()
+  std::uint64_t last_record = 0;   // offset of the record next() returned last
+  std::string corruption;          // what the first damaged region was, for the summary's detail
+  bool rereading = false;          // seek() was called: stream definitions may come again
 
-  // Reads n bytes at offset; reads always move forward, so the file is read sequentially.
   bool read(std::uint64_t offset, std::uint8_t* dst, std::size_t n) {
-    if (file) return std::fread(dst, 1, n, file.get()) == n;
+    if (file) {
+      if (offset != file_pos && ::fseeko(file.get(), static_cast<off_t>(offset), SEEK_SET) != 0) return false;
+      const std::size_t got = std::fread(dst, 1, n, file.get());
+      file_pos = offset + got;
+      return got == n;
+    }
     if (offset > memory.size() || n > memory.size() - offset) return false;
     std::memcpy(dst, memory.data() + offset, n);
     return true;
+  }
+
+  // A record header the writer could have written, with room for its record
+  // before the end of the file: cheap filters before a CRC is computed.
+  bool plausible_header(const std::uint8_t* h, std::uint64_t room) const {
+    const auto len = static_cast<std::uint32_t>(load_le<4>(h));
+    if (len > kRecordingMaxPayloadBytes || kRecordHeaderBytes + len + kRecordCrcBytes > room || h[5] != 0) return false;
+    const auto stream = static_cast<StreamId>(load_le<2>(h + 6));
+    switch (static_cast<RecordType>(h[4])) {
+      case RecordType::stream_def: return load_le<8>(h + 8) == 0 && stream != kFileLevelStream;
+      case RecordType::data: return stream != kFileLevelStream;
+      case RecordType::end: return len == 8 && stream == kFileLevelStream && load_le<8>(h + 8) == 0;
+    }
+    return false;
+  }
+
+  bool intact_record_at(std::uint64_t offset, const std::uint8_t* h) {
+    const auto len = static_cast<std::uint32_t>(load_le<4>(h));
+    std::vector<std::uint8_t> rec(kRecordHeaderBytes + len + kRecordCrcBytes);
+    if (!read(offset, rec.data(), rec.size())) return false;
+    const std::uint32_t computed = crc32_ieee(std::span(rec).first(kRecordHeaderBytes + len));
+    return computed == static_cast<std::uint32_t>(load_le<4>(rec.data() + kRecordHeaderBytes + len));
+  }
+
+  // The offset of the next intact record after a damaged one at `from`, if any.
+  std::optional<std::uint64_t> find_next_record(std::uint64_t from) {
+    constexpr std::size_t kWindow = 1 << 16;
+    for (std::uint64_t base = from + 1; base + kRecordHeaderBytes + kRecordCrcBytes <= size; base += kWindow) {
+      const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(kWindow + kRecordHeaderBytes - 1, size - base));
+      scan.resize(n);
+      if (!read(base, scan.data(), n)) return std::nullopt;
+      for (std::size_t i = 0; i < kWindow && i + kRecordHeaderBytes <= n; ++i) {
+        if (plausible_header(scan.data() + i, size - base - i) && intact_record_at(base + i, scan.data() + i)) {
+          return base + i;
+        }
+      }
+    }
+    return std::nullopt;
+  }
+
+  // Counts the damaged region [start, resume) and goes on at resume.
+  void note_damage(std::uint64_t start, std::uint64_t resume, const std::string& what) {
+    if (summary.corrupt_regions++ == 0) {
+      summary.first_corrupt_offset = start;
+      corruption = what;
+    }
+    summary.skipped_bytes += resume - start;
+    pos = resume;
+  }
+  // The same up to the next intact record; false if there is none.
+  bool skip_damage(std::uint64_t start, const std::string& what) {
+    const auto next = find_next_record(start);
+    note_damage(start, next.value_or(size), what);
+    return next.has_value();
   }
 
   std::string at(std::uint64_t offset) const { return "'" + name + "' at byte " + std::to_string(offset); }
@@ -790,18 +857,27 @@ struct RecordingReader::Impl {
 
   void finish(RecordingEnd end, std::string detail) {
     done = true;
+    summary.ignored_bytes = size - summary.valid_bytes;
+    const std::uint64_t after_end = summary.ignored_bytes - summary.skipped_bytes;
+    if (end == RecordingEnd::clean && after_end > 0) {
+      detail += "; " + std::to_string(after_end) + " bytes after the End record were ignored";
+    }
+    if (summary.corrupt_regions > 0) {
+      std::string lost = std::to_string(summary.skipped_bytes) + " damaged bytes skipped in " +
+                         std::to_string(summary.corrupt_regions) + " region" +
+                         (summary.corrupt_regions > 1 ? "s" : "") + " (the first: " + corruption + ")";
+      if (summary.lost_records > 0) lost += ", " + std::to_string(summary.lost_records) + " records lost";
+      detail = lost + "; then: " + detail;
+      end = RecordingEnd::corrupt;
+    }
     summary.end = end;
     summary.detail = std::move(detail);
-    summary.ignored_bytes = size - summary.valid_bytes;
-    if (end == RecordingEnd::clean && summary.ignored_bytes > 0) {
-      summary.detail += "; " + std::to_string(summary.ignored_bytes) + " bytes after the End record were ignored";
-    }
   }
 
   Error record_error(std::uint64_t offset, StreamId stream, TimeNs t, const std::string& problem) {
     ++summary.invalid_records;
     std::string s = "stream " + std::to_string(stream);
-    if (const StreamInfo* info = find(stream)) s += " '" + info->name + "'";
+    if (const StreamInfo* info = find(stream)) s += " '" + printable(info->name, 80) + "'";
     return make_error(Errc::parse_error, "recording " + at(offset) + " (" + s + ", t=" + std::to_string(t) +
                                              " ns): " + problem + "; record skipped");
   }
@@ -825,7 +901,11 @@ struct RecordingReader::Impl {
     if (d.remaining() > 0 && !allow_trailing) return "stream definition has unexpected trailing bytes";
     if (id == kFileLevelStream) return "stream id 65535 is reserved";
     if (info.name.empty()) return "stream has an empty name";
-    if (find(id)) return "stream id " + std::to_string(id) + " is defined twice";
+    if (const StreamInfo* known = find(id)) {
+      // After seek(), definitions read before come round again.
+      if (rereading && known->name == info.name && known->kind == info.kind) return {};
+      return "stream id " + std::to_string(id) + " is defined twice";
+    }
     if (index_of_id.size() <= id) index_of_id.resize(std::size_t{id} + 1, -1);
     index_of_id[id] = static_cast<std::int32_t>(streams.size());
     streams.push_back(std::move(info));
@@ -860,33 +940,58 @@ struct RecordingReader::Impl {
       const auto type = static_cast<RecordType>(h[4]);
       const auto stream = static_cast<StreamId>(load_le<2>(h.data() + 6));
       const auto time_ns = static_cast<TimeNs>(load_le<8>(h.data() + 8));
+      // Damage: go on at the next intact record (the CRC makes a false match
+      // a 1-in-4-billion event), or stop if there is none.
+      const auto damaged = [&](const std::string& what) {
+        if (skip_damage(start, what)) return true;
+        finish(RecordingEnd::corrupt, "no intact record after the damage; " + std::to_string(summary.records) +
+                                          " records were read");
+        return false;
+      };
       if (len > kRecordingMaxPayloadBytes) {
-        finish(RecordingEnd::corrupt, record_no() + " " + at(start) + " is corrupt (payload length " +
-                                          std::to_string(len) + " exceeds the limit); reading stopped there");
+        if (damaged(record_no() + " " + at(start) + " has payload length " + std::to_string(len) +
+                    ", above the limit")) {
+          continue;
+        }
         break;
       }
       const std::uint64_t total = kRecordHeaderBytes + len + kRecordCrcBytes;
       buf.resize(len + kRecordCrcBytes);
       if (total > remaining || !read(start + h.size(), buf.data(), buf.size())) {
+        // The writer cut off mid-record, unless an intact record follows: then
+        // the length field was damaged.
+        if (total > remaining) {
+          if (const auto next = find_next_record(start)) {
+            note_damage(start, *next, record_no() + " " + at(start) + " has payload length " + std::to_string(len) +
+                                          ", beyond the end of the file, but intact records follow");
+            continue;
+          }
+        }
         truncated(total);
         break;
       }
       const std::uint32_t computed = crc32_ieee(std::span(buf).first(len), crc32_ieee(h));
       const auto stored = static_cast<std::uint32_t>(load_le<4>(buf.data() + len));
       if (computed != stored) {
-        finish(RecordingEnd::corrupt, record_no() + " " + at(start) + " is corrupt (CRC " + hex32(computed) +
-                                          ", stored " + hex32(stored) + "); reading stopped there, " +
-                                          std::to_string(summary.records) + " records before it were read");
+        if (damaged(record_no() + " " + at(start) + " fails its CRC (" + hex32(computed) + ", stored " +
+                    hex32(stored) + ")")) {
+          continue;
+        }
         break;
       }
       pos = start + total;
-      summary.valid_bytes = pos;
+      last_record = start;
+      summary.valid_bytes += total;
       const std::span<const std::uint8_t> payload(buf.data(), len);
 
       if (type == RecordType::end) {
         Decoder d(payload);
         const std::uint64_t count = d.u64();
-        if (d.failed() || count != summary.records) {
+        if (!d.failed() && summary.corrupt_regions > 0 && count > summary.records) {
+          summary.lost_records = count - summary.records;
+          finish(RecordingEnd::corrupt, "End record seen after " + std::to_string(summary.records) + " of " +
+                                            std::to_string(count) + " records");
+        } else if (d.failed() || count != summary.records) {
           finish(RecordingEnd::corrupt, "End record " + at(start) + " counts " + std::to_string(count) +
                                             " records, but " + std::to_string(summary.records) +
                                             " were read: records are missing or were spliced in");
@@ -932,23 +1037,22 @@ RecordingReader::~RecordingReader() = default;
 
 Result<RecordingReader> RecordingReader::open(const std::filesystem::path& path) {
   return no_throw([&]() -> Result<RecordingReader> {
-    errno = 0;
-    FilePtr file(std::fopen(path.c_str(), "rb"));
+    // Regular files only (a FIFO would hang, /dev/zero never ends), and
+    // remembered as an input so that no output of this process can replace it.
+    auto input = open_input_file(path, "recording");
+    if (!input) return input.error();
+    const std::uint64_t size = input->size();
+    FilePtr file(::fdopen(input->fd(), "rb"));
     if (!file) {
-      const int err = errno;
-      return make_error(err == ENOENT ? Errc::not_found : Errc::io_error,
-                        "cannot open recording '" + path.string() + "': " + std::strerror(err) +
-                            (err == ENOENT ? "; check the path" : ""));
+      return make_error(Errc::io_error, "cannot read recording '" + printable(path.string(), 300) + "': " +
+                                            std::strerror(errno));
     }
-    struct stat st {};
-    if (::fstat(::fileno(file.get()), &st) != 0 || !S_ISREG(st.st_mode)) {
-      return make_error(Errc::invalid_argument, "'" + path.string() + "' is not a regular file; pass a recording file");
-    }
+    input->release();
     std::setvbuf(file.get(), nullptr, _IOFBF, 1 << 16);
     auto impl = std::make_unique<Impl>();
-    impl->name = path.string();
+    impl->name = printable(path.string(), 300);
     impl->file = std::move(file);
-    impl->size = static_cast<std::uint64_t>(st.st_size);
+    impl->size = size;
     if (auto s = impl->parse_header(); !s) return s.error();
     return RecordingReader(std::move(impl));
   });
@@ -981,5 +1085,60 @@ const StreamInfo* RecordingReader::find_stream(std::string_view name) const noex
   return nullptr;
 }
 const RecordingSummary& RecordingReader::summary() const noexcept { return impl_->summary; }
+std::uint64_t RecordingReader::last_record_offset() const noexcept { return impl_->last_record; }
+
+Status RecordingReader::seek(std::uint64_t record_offset) {
+  Impl& im = *impl_;
+  if (record_offset < kFileHeaderBytes || record_offset >= im.size) {
+    return make_error(Errc::out_of_range, "recording " + im.at(record_offset) + ": cannot seek there (the file has " +
+                                              std::to_string(im.size) + " bytes)");
+  }
+  im.pos = record_offset;
+  im.done = false;
+  im.summary = RecordingSummary{};
+  im.corruption.clear();
+  im.rereading = true;
+  return {};
+}
+
+// ==================================================================== timestamps
+
+TimestampGuard::Step TimestampGuard::check(TimeNs t) noexcept {
+  Step step;
+  if (held_) {
+    held_ = false;
+    if (t > held_ns_) {
+      step.release_held = true;
+      last_ = held_ns_;
+    } else {
+      step.reject_held = true;
+    }
+  }
+  if (last_ && t <= *last_) return step;
+  // The first sample waits for the second too: it may be the outlier.
+  DurationNs jump = 0;
+  if (!last_ || __builtin_sub_overflow(t, *last_, &jump) || jump > max_jump_ns_) {
+    held_ = true;
+    held_ns_ = t;
+    step.hold = true;
+    return step;
+  }
+  step.accept = true;
+  last_ = t;
+  return step;
+}
+
+bool TimestampGuard::finish() noexcept {
+  if (!held_) return false;
+  held_ = false;
+  if (last_) return false;
+  last_ = held_ns_;
+  return true;
+}
+
+void TimestampGuard::reset(TimeNs last_accepted_ns) noexcept {
+  last_ = last_accepted_ns;
+  held_ = false;
+}
 
 }  // namespace proprio

@@ -79,6 +79,10 @@ struct VistTrackerOptions {
   double max_abs_accel_mps2 = 16.0 * 9.80665 * 1.05;
   double max_abs_gyro_radps = 2000.0 * 0.017453292519943295 * 1.05;
   bool reject_saturated = true;
+  // An IMU sample this much later than the previous one of its IMU waits for
+  // the next: if that one is earlier, the jump was a bad stamp (a wall-clock
+  // time, a flipped bit) and only that sample is dropped (TimestampGuard).
+  double max_imu_time_jump_s = 10.0;
 
   Status validate() const;
   std::string describe() const;
@@ -90,6 +94,7 @@ struct VistStats {
   std::uint64_t imu_rejected_saturated = 0;
   std::uint64_t imu_rejected_out_of_order = 0;  // older than or equal to the previous sample of that IMU
   std::uint64_t imu_rejected_unknown_sensor = 0;
+  std::uint64_t imu_rejected_time_jump = 0;  // an isolated jump forward in time, not confirmed by the next sample
   std::uint64_t frames = 0;
   std::uint64_t frames_fused = 0;
   std::uint64_t frames_late = 0;       // captured before the core's time
@@ -186,6 +191,9 @@ class VistTracker {
   // IMU queue (arrival order), samples not yet integrated by the core.
   std::vector<TimedImuSample> queue_;
   std::vector<TimeNs> last_sample_ns_;  // per segment, newest accepted
+  std::vector<TimestampGuard> imu_time_guards_;  // per segment
+  std::vector<TimedImuSample> imu_held_;         // per segment: a sample after a time jump, until the next decides
+  bool accept_imu(std::size_t segment, const TimedImuSample& s);
   std::vector<Vec3> last_gyro_, last_accel_;  // per segment, newest accepted (for acquisition and holding)
   TimeNs newest_imu_ns_ = 0;
   bool have_imu_ = false;

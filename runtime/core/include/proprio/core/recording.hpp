@@ -174,7 +174,10 @@ enum class RecordingEnd : std::uint8_t {
   clean,        // End record seen: the writer closed the file
   missing_end,  // ends on a record boundary without End: the writer crashed or is still writing
   truncated,    // ends inside a record (crash mid-write); that partial record was ignored
-  corrupt,      // a record failed its length or CRC check; it and everything after were ignored
+  // Damaged bytes were found: a record failed its length or CRC check, or End's
+  // count does not match. The reader skipped to the next intact record and went
+  // on (corrupt_regions, skipped_bytes say how much was lost), or found none.
+  corrupt,
 };
 const char* to_string(RecordingEnd end) noexcept;
 
@@ -185,7 +188,16 @@ struct RecordingSummary {
   std::uint64_t invalid_records = 0;  // intact, but next() rejected the content with an Error
   std::uint64_t skipped_records = 0;  // unknown record type or stream kind (newer minor version)
   std::uint64_t valid_bytes = 0;      // file header + complete records, End included
-  std::uint64_t ignored_bytes = 0;    // partial or corrupt tail, or bytes after End
+  std::uint64_t ignored_bytes = 0;    // every byte not in valid_bytes: damaged regions, partial tail, after End
+  // Damaged regions skipped by resynchronising on the next intact record, and
+  // their bytes (part of ignored_bytes). A region that runs to the end of the
+  // file counts too.
+  std::uint64_t corrupt_regions = 0;
+  std::uint64_t skipped_bytes = 0;
+  std::uint64_t first_corrupt_offset = 0;  // byte offset of the first damaged region (if any)
+  // Records lost in damaged regions, from the End record's count; 0 when the
+  // file has no End record (the count is then unknown).
+  std::uint64_t lost_records = 0;
 
   // The writer closed the file and nothing was lost or damaged.
   bool clean() const noexcept { return end == RecordingEnd::clean && ignored_bytes == 0 && invalid_records == 0; }
@@ -220,10 +232,53 @@ class RecordingReader {
   const StreamInfo* find_stream(std::string_view name) const noexcept;
   const RecordingSummary& summary() const noexcept;
 
+  // Random access for readers that index a file in one pass and come back
+  // later (ReplayHandSource): the byte offset of the record next() returned
+  // last, and a jump back to such an offset. After seek(), next() goes on
+  // from there and summary() counts again what it reads; the streams stay.
+  std::uint64_t last_record_offset() const noexcept;
+  Status seek(std::uint64_t record_offset);
+
  private:
   struct Impl;
   explicit RecordingReader(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
+};
+
+// Keeps one stream's time stamps in order and catches isolated jumps, e.g. a
+// CLOCK_REALTIME stamp from a third-party writer in a CLOCK_MONOTONIC stream,
+// or a flipped bit. A sample not later than the previous accepted one is
+// rejected. A sample more than max_jump_ns after it is held back: the next
+// sample decides. Later still, and the new timeline is real (a pause, a
+// reconnect): the held sample is accepted. Earlier, and the held sample was an
+// outlier: it is rejected and the stream goes on. One bad stamp thus costs one
+// sample, never the rest of the stream. The caller keeps the held sample.
+class TimestampGuard {
+ public:
+  static constexpr DurationNs kDefaultMaxJumpNs = 10 * kNsPerSecond;
+  explicit TimestampGuard(DurationNs max_jump_ns = kDefaultMaxJumpNs) noexcept : max_jump_ns_(max_jump_ns) {}
+
+  struct Step {
+    bool release_held = false;  // accept the held sample now, before this one
+    bool reject_held = false;   // the held sample was an outlier
+    bool accept = false;        // accept this sample
+    bool hold = false;          // keep this sample until the next one decides
+    // Neither accept nor hold: this sample is rejected (not later than the last accepted one).
+  };
+  Step check(TimeNs t_ns) noexcept;
+  // The stream ended: a sample still held is rejected, unless nothing was
+  // accepted before it (a one-sample stream). Returns whether to accept it.
+  bool finish() noexcept;
+  // Restarts from a known accepted sample (after a seek).
+  void reset(TimeNs last_accepted_ns) noexcept;
+  bool holding() const noexcept { return held_; }
+  std::optional<TimeNs> last_accepted_ns() const noexcept { return last_; }
+
+ private:
+  DurationNs max_jump_ns_;
+  std::optional<TimeNs> last_;
+  TimeNs held_ns_ = 0;
+  bool held_ = false;
 };
 
 }  // namespace proprio

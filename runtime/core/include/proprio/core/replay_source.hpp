@@ -2,7 +2,12 @@
 // A HandSource that plays back the HandPose streams of a session recording
 // (docs/recording-format.md), so trackers' consumers (OpenXR layer, engine,
 // analysis) run on recorded sessions exactly as on live ones.
+//
+// The recording is streamed, not loaded: open() indexes it in one pass, and
+// lookups read the poses they need through a small window per hand, so memory
+// stays the same for a 10-second and a 10-hour file.
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -22,6 +27,17 @@ struct ReplayOptions {
   DurationNs max_interpolation_gap_ns = 200 * kNsPerMillisecond;  // wider gaps are reported, not bridged
   DurationNs max_prediction_ns = 0;  // past the last sample: 0 serves recorded time only
   bool loop = false;  // play the recording over and over (time wraps at its end)
+  // A pose this much later than the previous one is an outlier (a wall-clock
+  // stamp, a flipped bit) unless the next pose confirms the new timeline
+  // (TimestampGuard); outliers are left out and counted in skipped_samples().
+  DurationNs max_time_jump_ns = TimestampGuard::kDefaultMaxJumpNs;
+  // Memory: poses kept per hand around the last lookup, and entries of the
+  // per-hand index of file offsets (halved by dropping every other entry when
+  // full, so a longer file only spaces the entries further apart).
+  std::size_t window_samples = 256;
+  std::size_t max_index_entries = 4096;
+
+  Status validate() const;
 };
 
 struct FileTimeRange {
@@ -32,15 +48,19 @@ struct FileTimeRange {
 struct ReplayStream {
   std::string name;
   Handedness hand = Handedness::right;
-  std::size_t samples = 0;  // poses loaded
+  std::size_t samples = 0;  // poses that will be played
 };
 
 class ReplayHandSource final : public HandSource {
  public:
-  // Loads the selected poses into memory. Errors: those of RecordingReader::open,
+  // Indexes the selected poses. Errors: those of RecordingReader::open,
   // Errc::not_found (no HandPose stream matches), Errc::invalid_argument (a hand
-  // has poses in several selected streams), Errc::unavailable (no poses at all).
+  // has poses in several selected streams, or bad options), Errc::unavailable
+  // (no poses at all).
   static Result<ReplayHandSource> open(const std::filesystem::path& path, ReplayOptions options = {});
+  ReplayHandSource(ReplayHandSource&&) noexcept;
+  ReplayHandSource& operator=(ReplayHandSource&&) noexcept;
+  ~ReplayHandSource() override;
 
   std::string_view name() const noexcept override { return "replay"; }
   bool available(Handedness hand) const noexcept override;
@@ -57,16 +77,24 @@ class ReplayHandSource final : public HandSource {
   const std::vector<ReplayStream>& streams() const noexcept { return streams_; }
   const RecordingSummary& recording_summary() const noexcept { return summary_; }
   // Poses of the selected streams left out because they were not newer than
-  // the previous one (records the reader rejected: recording_summary()).
+  // the previous one or were isolated time jumps (records the reader
+  // rejected: recording_summary()).
   std::size_t skipped_samples() const noexcept { return skipped_; }
+  // What the source holds in memory now: poses in the windows and index
+  // entries, over both hands. Bounded by the options, whatever the file's length.
+  std::size_t buffered_samples() const noexcept;
+  std::size_t index_entries() const noexcept;
+  // A lookup failed to read the file (it changed or vanished after open());
+  // such lookups answer PoseLookup::empty.
+  bool read_failed() const noexcept;
 
  private:
-  ReplayHandSource() = default;
-  const PoseHistory& history(Handedness hand) const { return histories_[static_cast<std::size_t>(hand)]; }
+  struct Stream;
+  ReplayHandSource();
   bool to_file_time(TimeNs t_ns, TimeNs& file_t) const noexcept;
 
   std::string path_;
-  std::vector<PoseHistory> histories_;  // indexed by Handedness
+  std::unique_ptr<Stream> stream_;  // per-hand readers, windows and indices, behind a mutex
   FileTimeRange range_;
   DurationNs offset_ns_ = 0;
   bool loop_ = false;
@@ -74,5 +102,22 @@ class ReplayHandSource final : public HandSource {
   RecordingSummary summary_;
   std::size_t skipped_ = 0;
 };
+
+// What a replay file holds and what is wrong with it, without playing it: for
+// `proprio layer status` and for the OpenXR layer's start-up warning.
+struct ReplayCheck {
+  RecordingSummary summary;         // integrity (clean, truncated, corrupt regions ...)
+  std::vector<ReplayStream> streams;  // what would be played
+  std::size_t skipped_samples = 0;  // out-of-order or outlier poses left out
+  // True when something was lost or rejected (summary not clean, skipped
+  // samples, or the file grew no End record); `problem` then says what.
+  bool damaged = false;
+  std::string problem;
+};
+// Errors are those of ReplayHandSource::open (not a recording, no hand poses ...).
+Result<ReplayCheck> check_replay_file(const std::filesystem::path& path, const ReplayOptions& options = {});
+// One line for users about a damaged replay ("" when intact), e.g.
+// "'x.prec' is damaged: 1234 damaged bytes skipped ...; replaying what could be read".
+std::string describe_replay_problem(const std::string& path, const RecordingSummary& summary, std::size_t skipped);
 
 }  // namespace proprio

@@ -48,6 +48,8 @@ run(0 layer status)
 
 run(0 xr-probe --seconds 1.5 --space local)
 expect_contains("${OUT}" "Proprio mock runtime")
+# The mock runs headless frames, so the probe stays headless (no Vulkan fallback).
+expect_contains("${OUT}" "Session: headless (XR_MND_headless)")
 expect_contains("${OUT}" "left")
 expect_contains("${OUT}" "right")
 

@@ -2,8 +2,25 @@
 // whatever API layers are enabled) for XR_EXT_hand_tracking joints and prints
 // what comes back, once a second. It goes through the system's OpenXR loader,
 // exactly like any other app.
+//
+// Sessions: headless (XR_MND_headless) when the runtime offers it, since that
+// needs no GPU. Monado offers the extension but refuses frames in headless
+// sessions (xrBeginFrame: XR_ERROR_CALL_ORDER_INVALID), so when a headless
+// session cannot run its first frame the probe starts again with a Vulkan
+// graphics binding (XR_KHR_vulkan_enable2), as `hello_xr -g Vulkan2` would.
+// Frames end with no layers, which the spec allows, so no swapchain is needed.
 #define XR_USE_TIMESPEC 1
 #include <time.h>
+
+// Set by CMake when proprio::render (Vulkan) is linked: the Vulkan session needs it.
+#ifndef PROPRIO_HAVE_RENDER
+#define PROPRIO_HAVE_RENDER 0
+#endif
+#if PROPRIO_HAVE_RENDER
+// Before the OpenXR platform header: XR_KHR_vulkan_enable2's structures use Vulkan's types.
+#define XR_USE_GRAPHICS_API_VULKAN 1
+#include <vulkan/vulkan.h>
+#endif
 
 #include <openxr/openxr.h>
 #include <openxr/openxr_platform.h>
@@ -17,6 +34,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,6 +43,9 @@
 #include "proprio/core/log.hpp"
 #include "proprio/openxr_layer/xr_ext.hpp"
 #include "xr_loader_paths.hpp"
+#if PROPRIO_HAVE_RENDER
+#include "proprio/render/context.hpp"
+#endif
 
 namespace proprio::cli {
 
@@ -40,9 +61,29 @@ struct ProbeArgs {
   double seconds = 5.0;
   std::string space = "view";
   std::string hand = "both";
+  std::string session = "auto";  // auto | headless | vulkan
   bool enable_layer = false;
   bool data_source = false;
 };
+
+enum class SessionKind { headless, vulkan };
+
+// XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME, which the platform header defines only with Vulkan's headers.
+constexpr const char* kVulkanEnable2Extension = "XR_KHR_vulkan_enable2";
+
+const char* session_kind_name(SessionKind k) {
+  return k == SessionKind::headless ? "headless (XR_MND_headless)" : "Vulkan graphics binding (XR_KHR_vulkan_enable2)";
+}
+
+// How a session's frame loop ended.
+enum class LoopEnd {
+  completed,         // --seconds ran out, Ctrl-C, or the runtime ended the session
+  failed,            // a call failed (reported)
+  headless_refused,  // a headless session could not run its first frame
+};
+
+// Internal: a headless session could not be created or run (the caller may fall back).
+constexpr int kHeadlessRefused = -1;
 
 // Names of XrResult values without an instance (xrResultToString needs one).
 const char* result_name(XrResult r) {
@@ -99,6 +140,16 @@ struct HandProbe {
   HandWindow window, total;
 };
 
+// Adds the current window to the run's totals and starts a new one.
+void fold_window(HandProbe& h) {
+  h.total.locates += h.window.locates;
+  h.total.distinct += h.window.distinct;
+  h.total.active += h.window.active;
+  h.total.fully_tracked_joints += h.window.fully_tracked_joints;
+  h.total.joints += h.window.joints;
+  h.window = {};
+}
+
 class Probe {
  public:
   explicit Probe(ProbeArgs args) : args_(std::move(args)) {}
@@ -109,39 +160,61 @@ class Probe {
   // Reports a failed call with the runtime's name for the result; true when it succeeded.
   bool ok(XrResult r, const char* what) {
     if (XR_SUCCEEDED(r)) return true;
+    logger().error("{} failed: {} ({})", what, result_text(r), static_cast<int>(r));
+    return false;
+  }
+  std::string result_text(XrResult r) {
     char name[XR_MAX_RESULT_STRING_SIZE] = {};
     if (instance_ == XR_NULL_HANDLE || XR_FAILED(xrResultToString(instance_, r, name))) {
       std::snprintf(name, sizeof name, "%s", result_name(r));
     }
-    logger().error("{} failed: {} ({})", what, name, static_cast<int>(r));
-    return false;
+    return name;
   }
   template <typename Fn>
   bool load(const char* fn_name, Fn& fn) {
     return ok(xrGetInstanceProcAddr(instance_, fn_name, reinterpret_cast<PFN_xrVoidFunction*>(&fn)), fn_name);
   }
 
-  int create_instance();
-  int create_session();
+  int check_extensions();
+  int create_instance(SessionKind kind);
+  int create_session(SessionKind kind);
+  int create_vulkan_binding();
+  LoopEnd run_frames();
   bool pump_events();  // false when the session ended or the instance is lost
   bool wait_for_state(XrSessionState wanted, double timeout_s);
   XrTime now();
-  void locate(HandProbe& h, XrTime t);
-  void report_second(double t_s, double window_s);
-  void teardown();
+  bool locate(HandProbe& h, XrTime t);
+  // Prints the window's report (unless !print) and adds the window to the run's totals.
+  void report_second(double t_s, double window_s, bool print = true);
+  int summarise(LoopEnd end);
+  bool teardown();
 
   ProbeArgs args_;
+  std::vector<XrExtensionProperties> offered_;
+  bool has_headless_ext_ = false, has_vulkan_ext_ = false;
+  bool printed_system_ = false;
+  SessionKind kind_ = SessionKind::headless;
   XrInstance instance_ = XR_NULL_HANDLE;
   XrSystemId system_ = XR_NULL_SYSTEM_ID;
   XrSession session_ = XR_NULL_HANDLE;
   XrSpace space_ = XR_NULL_HANDLE;
   XrSessionState state_ = XR_SESSION_STATE_UNKNOWN;
   bool session_running_ = false, exiting_ = false;
+  bool failed_ = false;  // a call failed or the runtime was lost: exit status 1
   bool has_data_source_ext_ = false;
   XrViewConfigurationType view_config_ = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
   XrEnvironmentBlendMode blend_mode_ = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
   std::vector<HandProbe> hands_;
   bool zero_display_time_reported_ = false;
+  std::uint64_t frames_ = 0;
+  double run_s_ = 0.0;
+  // What a headless session's first failed frame call was, for the fallback message.
+  std::string refused_call_;
+#if PROPRIO_HAVE_RENDER
+  // The Vulkan session's device side: destroyed after the session, before the instance.
+  std::unique_ptr<render::VulkanContext> vulkan_;
+  XrGraphicsBindingVulkan2KHR vulkan_binding_{};
+#endif
 
   PFN_xrCreateHandTrackerEXT create_hand_tracker_ = nullptr;
   PFN_xrDestroyHandTrackerEXT destroy_hand_tracker_ = nullptr;
@@ -149,37 +222,43 @@ class Probe {
   PFN_xrConvertTimespecTimeToTimeKHR convert_timespec_ = nullptr;
 };
 
-int Probe::create_instance() {
+// Lists the instance extensions (the runtime's and, with --enable-layer, the
+// layer's) and checks for the ones every session needs.
+int Probe::check_extensions() {
   uint32_t count = 0;
   if (!ok(xrEnumerateInstanceExtensionProperties(nullptr, 0, &count, nullptr), "xrEnumerateInstanceExtensionProperties")) {
     logger().error("the OpenXR loader found no usable runtime. Check 'proprio layer status' (Active runtime) or set "
                    "XR_RUNTIME_JSON; XR_LOADER_DEBUG=all shows what the loader tried");
     return kExitError;
   }
-  std::vector<XrExtensionProperties> exts(count, make<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
-  if (!ok(xrEnumerateInstanceExtensionProperties(nullptr, count, &count, exts.data()),
+  offered_.assign(count, make<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
+  if (!ok(xrEnumerateInstanceExtensionProperties(nullptr, count, &count, offered_.data()),
           "xrEnumerateInstanceExtensionProperties")) {
     return kExitError;
   }
+  offered_.resize(count);
   // With --enable-layer the layer's own extensions count too.
   if (args_.enable_layer) {
     uint32_t n = 0;
     if (ok(xrEnumerateInstanceExtensionProperties(xr::kLayerName, 0, &n, nullptr),
            "xrEnumerateInstanceExtensionProperties(XR_APILAYER_PROPRIO_hand_tracking)")) {
       std::vector<XrExtensionProperties> more(n, make<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
-      if (ok(xrEnumerateInstanceExtensionProperties(xr::kLayerName, n, &n, more.data()), "xrEnumerateInstanceExtensionProperties")) {
-        exts.insert(exts.end(), more.begin(), more.begin() + n);
+      if (!ok(xrEnumerateInstanceExtensionProperties(xr::kLayerName, n, &n, more.data()),
+              "xrEnumerateInstanceExtensionProperties")) {
+        return kExitError;
       }
+      offered_.insert(offered_.end(), more.begin(), more.begin() + n);
     } else {
       logger().error("--enable-layer: the loader does not find {}; run 'proprio layer install' first", xr::kLayerName);
       return kExitError;
     }
   }
   auto offered = [&](const char* name) {
-    return std::any_of(exts.begin(), exts.end(), [&](const auto& e) { return std::strcmp(e.extensionName, name) == 0; });
+    return std::any_of(offered_.begin(), offered_.end(),
+                       [&](const auto& e) { return std::strcmp(e.extensionName, name) == 0; });
   };
   std::string list;
-  for (const auto& e : exts) list += (list.empty() ? "" : ", ") + std::string(e.extensionName);
+  for (const auto& e : offered_) list += (list.empty() ? "" : ", ") + std::string(e.extensionName);
   logger().debug("instance extensions offered: {}", list);
 
   if (!offered(XR_EXT_HAND_TRACKING_EXTENSION_NAME)) {
@@ -192,21 +271,24 @@ int Probe::create_instance() {
                    "monotonic clock in XrTime");
     return kExitError;
   }
-  if (!offered(XR_MND_HEADLESS_EXTENSION_NAME)) {
-    logger().error("the runtime does not offer XR_MND_headless, so a session needs a graphics binding. xr-probe only "
-                   "supports headless runtimes for now (Monado, the test mock runtime); a Vulkan binding comes with "
-                   "the engine");
-    return kExitError;
-  }
+  has_headless_ext_ = offered(XR_MND_HEADLESS_EXTENSION_NAME);
+  has_vulkan_ext_ = offered(kVulkanEnable2Extension);
   // Opt-in: Debian's 1.0.20 core_validation layer predates XR_EXT_hand_tracking_data_source
   // and rejects its structs in a next chain.
   has_data_source_ext_ = args_.data_source && offered(XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME);
   if (args_.data_source && !has_data_source_ext_) {
     std::printf("(--data-source: XR_EXT_hand_tracking_data_source is not offered; continuing without it)\n");
   }
+  return kExitOk;
+}
 
+// The instance for one kind of session: headless enables XR_MND_headless,
+// Vulkan enables XR_KHR_vulkan_enable2 and not XR_MND_headless (some Monado
+// versions create no compositor for an instance that enabled it).
+int Probe::create_instance(SessionKind kind) {
   std::vector<const char*> enabled = {XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME,
-                                      XR_MND_HEADLESS_EXTENSION_NAME};
+                                      kind == SessionKind::headless ? XR_MND_HEADLESS_EXTENSION_NAME
+                                                                    : kVulkanEnable2Extension};
   if (has_data_source_ext_) enabled.push_back(XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME);
   const char* layers[] = {xr::kLayerName};
 
@@ -225,8 +307,10 @@ int Probe::create_instance() {
 
   auto ip = make<XrInstanceProperties>(XR_TYPE_INSTANCE_PROPERTIES);
   if (!ok(xrGetInstanceProperties(instance_, &ip), "xrGetInstanceProperties")) return kExitError;
-  std::printf("Runtime: %s %u.%u.%u\n", ip.runtimeName, XR_VERSION_MAJOR(ip.runtimeVersion),
-              XR_VERSION_MINOR(ip.runtimeVersion), XR_VERSION_PATCH(ip.runtimeVersion));
+  if (!printed_system_) {
+    std::printf("Runtime: %s %u.%u.%u\n", ip.runtimeName, XR_VERSION_MAJOR(ip.runtimeVersion),
+                XR_VERSION_MINOR(ip.runtimeVersion), XR_VERSION_PATCH(ip.runtimeVersion));
+  }
 
   if (!load("xrCreateHandTrackerEXT", create_hand_tracker_) || !load("xrDestroyHandTrackerEXT", destroy_hand_tracker_) ||
       !load("xrLocateHandJointsEXT", locate_hand_joints_) ||
@@ -245,9 +329,12 @@ int Probe::create_instance() {
   auto sp = make<XrSystemProperties>(XR_TYPE_SYSTEM_PROPERTIES);
   sp.next = &ht;
   if (!ok(xrGetSystemProperties(instance_, system_, &sp), "xrGetSystemProperties")) return kExitError;
-  std::printf("System: %s (vendor %u)\n", sp.systemName, sp.vendorId);
-  std::printf("supportsHandTracking: %s\n", ht.supportsHandTracking ? "true" : "false");
-  if (has_data_source_ext_) std::printf("XR_EXT_hand_tracking_data_source: enabled\n");
+  if (!printed_system_) {
+    std::printf("System: %s (vendor %u)\n", sp.systemName, sp.vendorId);
+    std::printf("supportsHandTracking: %s\n", ht.supportsHandTracking ? "true" : "false");
+    if (has_data_source_ext_) std::printf("XR_EXT_hand_tracking_data_source: enabled\n");
+    printed_system_ = true;
+  }
   if (!ht.supportsHandTracking) {
     logger().error("the system reports supportsHandTracking = false: no hand tracker can be created. If Proprio's "
                    "layer is enabled, check its configuration and log ('proprio layer status')");
@@ -256,13 +343,94 @@ int Probe::create_instance() {
   return kExitOk;
 }
 
-int Probe::create_session() {
-  // XR_MND_headless: the primary view configuration is not used by a headless
-  // session, so the probe does not ask for the list (the test mock runtime
-  // does not implement xrEnumerateViewConfigurations, and Debian's 1.0.20
-  // loader crashes on a function a runtime lacks).
+#if PROPRIO_HAVE_RENDER
+// XR_KHR_vulkan_enable2: the runtime creates the Vulkan instance and device
+// (adding what it needs), through the hooks of the renderer's Vulkan context.
+int Probe::create_vulkan_binding() {
+  PFN_xrGetVulkanGraphicsRequirements2KHR get_requirements = nullptr;
+  PFN_xrCreateVulkanInstanceKHR create_vk_instance = nullptr;
+  PFN_xrGetVulkanGraphicsDevice2KHR get_vk_device = nullptr;
+  PFN_xrCreateVulkanDeviceKHR create_vk_device = nullptr;
+  if (!load("xrGetVulkanGraphicsRequirements2KHR", get_requirements) ||
+      !load("xrCreateVulkanInstanceKHR", create_vk_instance) ||
+      !load("xrGetVulkanGraphicsDevice2KHR", get_vk_device) || !load("xrCreateVulkanDeviceKHR", create_vk_device)) {
+    return kExitError;
+  }
+  auto requirements = make<XrGraphicsRequirementsVulkan2KHR>(XR_TYPE_GRAPHICS_REQUIREMENTS_VULKAN2_KHR);
+  if (!ok(get_requirements(instance_, system_, &requirements), "xrGetVulkanGraphicsRequirements2KHR")) return kExitError;
+  // The renderer's context asks for Vulkan 1.2.
+  if (requirements.minApiVersionSupported > XR_MAKE_VERSION(1, 2, 0)) {
+    logger().error("the runtime needs Vulkan {}.{} or newer; the probe's Vulkan context is 1.2",
+                   XR_VERSION_MAJOR(requirements.minApiVersionSupported),
+                   XR_VERSION_MINOR(requirements.minApiVersionSupported));
+    return kExitError;
+  }
+  render::ContextOptions co;
+  co.app_name = "proprio xr-probe";
+  co.create_instance = [&](const VkInstanceCreateInfo& info) -> Result<VkInstance> {
+    auto xi = make<XrVulkanInstanceCreateInfoKHR>(XR_TYPE_VULKAN_INSTANCE_CREATE_INFO_KHR);
+    xi.systemId = system_;
+    xi.pfnGetInstanceProcAddr = &vkGetInstanceProcAddr;
+    xi.vulkanCreateInfo = &info;
+    VkInstance instance = VK_NULL_HANDLE;
+    VkResult vr = VK_SUCCESS;
+    if (const XrResult r = create_vk_instance(instance_, &xi, &instance, &vr); XR_FAILED(r)) {
+      return make_error(Errc::io_error, "xrCreateVulkanInstanceKHR failed: " + result_text(r));
+    }
+    if (vr != VK_SUCCESS) return render::vk_error("vkCreateInstance (through OpenXR)", vr);
+    return instance;
+  };
+  co.pick_physical_device = [&](VkInstance instance) -> Result<VkPhysicalDevice> {
+    auto gi = make<XrVulkanGraphicsDeviceGetInfoKHR>(XR_TYPE_VULKAN_GRAPHICS_DEVICE_GET_INFO_KHR);
+    gi.systemId = system_;
+    gi.vulkanInstance = instance;
+    VkPhysicalDevice device = VK_NULL_HANDLE;
+    if (const XrResult r = get_vk_device(instance_, &gi, &device); XR_FAILED(r)) {
+      return make_error(Errc::io_error, "xrGetVulkanGraphicsDevice2KHR failed: " + result_text(r));
+    }
+    return device;
+  };
+  co.create_device = [&](VkPhysicalDevice physical, const VkDeviceCreateInfo& info) -> Result<VkDevice> {
+    auto di = make<XrVulkanDeviceCreateInfoKHR>(XR_TYPE_VULKAN_DEVICE_CREATE_INFO_KHR);
+    di.systemId = system_;
+    di.pfnGetInstanceProcAddr = &vkGetInstanceProcAddr;
+    di.vulkanPhysicalDevice = physical;
+    di.vulkanCreateInfo = &info;
+    VkDevice device = VK_NULL_HANDLE;
+    VkResult vr = VK_SUCCESS;
+    if (const XrResult r = create_vk_device(instance_, &di, &device, &vr); XR_FAILED(r)) {
+      return make_error(Errc::io_error, "xrCreateVulkanDeviceKHR failed: " + result_text(r));
+    }
+    if (vr != VK_SUCCESS) return render::vk_error("vkCreateDevice (through OpenXR)", vr);
+    return device;
+  };
+  auto ctx = render::VulkanContext::create(co);
+  if (!ctx) {
+    logger().error("the Vulkan graphics binding could not be set up: {}", ctx.error().message);
+    return kExitError;
+  }
+  vulkan_ = std::move(*ctx);
+  vulkan_binding_ = make<XrGraphicsBindingVulkan2KHR>(XR_TYPE_GRAPHICS_BINDING_VULKAN2_KHR);
+  vulkan_binding_.instance = vulkan_->instance();
+  vulkan_binding_.physicalDevice = vulkan_->physical_device();
+  vulkan_binding_.device = vulkan_->device();
+  vulkan_binding_.queueFamilyIndex = vulkan_->queue_family();
+  vulkan_binding_.queueIndex = 0;
+  return kExitOk;
+}
+#else
+int Probe::create_vulkan_binding() {
+  logger().error("this build of proprio has no Vulkan renderer (proprio::render), so xr-probe cannot open a Vulkan "
+                 "session");
+  return kExitError;
+}
+#endif
+
+int Probe::create_session(SessionKind kind) {
+  // PRIMARY_STEREO without asking for the runtime's list: every HMD runtime
+  // has it, a headless session ignores it, and Debian's 1.0.20 loader crashes
+  // on a function a runtime lacks.
   uint32_t n = 0;
-  n = 0;
   if (ok(xrEnumerateEnvironmentBlendModes(instance_, system_, view_config_, 0, &n, nullptr),
          "xrEnumerateEnvironmentBlendModes") &&
       n > 0) {
@@ -273,13 +441,30 @@ int Probe::create_session() {
     }
   }
 
-  // Headless (XR_MND_headless): no graphics binding in the chain.
   auto sci = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
   sci.systemId = system_;
-  if (!ok(xrCreateSession(instance_, &sci, &session_), "xrCreateSession (headless)")) return kExitError;
+  std::string device;
+  if (kind == SessionKind::vulkan) {
+    if (int rc = create_vulkan_binding(); rc != kExitOk) return rc;
+#if PROPRIO_HAVE_RENDER
+    sci.next = &vulkan_binding_;
+    device = " on " + vulkan_->device_name();
+#endif
+  }
+  // Headless (XR_MND_headless): no graphics binding in the chain.
+  const XrResult created = xrCreateSession(instance_, &sci, &session_);
+  if (kind == SessionKind::headless && XR_FAILED(created) && args_.session == "auto" && has_vulkan_ext_) {
+    refused_call_ = "xrCreateSession: " + result_text(created);
+    return kHeadlessRefused;
+  }
+  if (!ok(created, kind == SessionKind::headless ? "xrCreateSession (headless)" : "xrCreateSession (Vulkan)")) {
+    return kExitError;
+  }
 
   if (!wait_for_state(XR_SESSION_STATE_READY, 10.0)) {
-    if (!g_sigint_stop.load()) logger().error("the session never became READY (last state {})", session_state_name(state_));
+    if (!g_sigint_stop.load() && !failed_) {
+      logger().error("the session never became READY (last state {})", session_state_name(state_));
+    }
     return kExitError;
   }
   auto bi = make<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
@@ -323,8 +508,9 @@ int Probe::create_session() {
     const std::string what = std::string("xrCreateHandTrackerEXT(") + h.name + ")";
     if (!ok(create_hand_tracker_(session_, &hci, &h.tracker), what.c_str())) return kExitError;
   }
-  std::printf("Headless session running; locating %s hand joints in %s space.\n\n", args_.hand.c_str(),
-              args_.space.c_str());
+  std::printf("Session: %s%s; locating %s hand joints in %s space.\n\n", session_kind_name(kind), device.c_str(),
+              args_.hand.c_str(), args_.space.c_str());
+  std::fflush(stdout);
   return kExitOk;
 }
 
@@ -333,7 +519,10 @@ bool Probe::pump_events() {
     auto ev = make<XrEventDataBuffer>(XR_TYPE_EVENT_DATA_BUFFER);
     const XrResult r = xrPollEvent(instance_, &ev);
     if (r == XR_EVENT_UNAVAILABLE) return true;
-    if (!ok(r, "xrPollEvent")) return false;
+    if (!ok(r, "xrPollEvent")) {
+      failed_ = true;
+      return false;
+    }
     switch (ev.type) {
       case XR_TYPE_EVENT_DATA_SESSION_STATE_CHANGED: {
         const auto& sc = reinterpret_cast<const XrEventDataSessionStateChanged&>(ev);
@@ -352,6 +541,7 @@ bool Probe::pump_events() {
       case XR_TYPE_EVENT_DATA_INSTANCE_LOSS_PENDING:
         logger().error("the runtime is going away (instance loss pending)");
         exiting_ = true;
+        failed_ = true;
         return false;
       case XR_TYPE_EVENT_DATA_EVENTS_LOST:
         logger().warn("the runtime dropped events");
@@ -373,15 +563,17 @@ bool Probe::wait_for_state(XrSessionState wanted, double timeout_s) {
   return true;
 }
 
+// The current time as XrTime; 0 when the conversion failed (reported).
 XrTime Probe::now() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   XrTime t = 0;
-  ok(convert_timespec_(instance_, &ts, &t), "xrConvertTimespecTimeToTimeKHR");
+  if (!ok(convert_timespec_(instance_, &ts, &t), "xrConvertTimespecTimeToTimeKHR")) return 0;
   return t;
 }
 
-void Probe::locate(HandProbe& h, XrTime t) {
+// False when the call failed (reported).
+bool Probe::locate(HandProbe& h, XrTime t) {
   auto vel = make<XrHandJointVelocitiesEXT>(XR_TYPE_HAND_JOINT_VELOCITIES_EXT);
   vel.jointCount = XR_HAND_JOINT_COUNT_EXT;
   vel.jointVelocities = h.velocities.data();
@@ -397,13 +589,13 @@ void Probe::locate(HandProbe& h, XrTime t) {
   const std::string what = std::string("xrLocateHandJointsEXT(") + h.name + ")";
   if (!ok(locate_hand_joints_(h.tracker, &li, &loc), what.c_str())) {
     h.active = false;
-    return;
+    return false;
   }
   ++h.window.locates;
   h.active = loc.isActive;
   if (!loc.isActive) {
     h.have_previous = false;
-    return;
+    return true;
   }
   ++h.window.active;
   bool changed = !h.have_previous;
@@ -416,11 +608,16 @@ void Probe::locate(HandProbe& h, XrTime t) {
   }
   h.have_previous = true;
   if (changed) ++h.window.distinct;
+  return true;
 }
 
-void Probe::report_second(double t_s, double window_s) {
+void Probe::report_second(double t_s, double window_s, bool print) {
   for (auto& h : hands_) {
     const HandWindow& w = h.window;
+    if (!print) {
+      fold_window(h);
+      continue;
+    }
     std::printf("t=%5.1f s %-5s %s", t_s, h.name, h.active ? "active  " : "INACTIVE");
     if (h.active) {
       const auto& wrist = h.joints[XR_HAND_JOINT_WRIST_EXT].pose.position;
@@ -449,24 +646,72 @@ void Probe::report_second(double t_s, double window_s) {
     std::printf(" joints fully tracked %5.1f%%, locate %6.1f Hz, distinct data %6.1f Hz\n",
                 w.joints ? 100.0 * static_cast<double>(w.fully_tracked_joints) / static_cast<double>(w.joints) : 0.0,
                 static_cast<double>(w.locates) / window_s, static_cast<double>(w.distinct) / window_s);
-    h.total.locates += w.locates;
-    h.total.distinct += w.distinct;
-    h.total.active += w.active;
-    h.total.fully_tracked_joints += w.fully_tracked_joints;
-    h.total.joints += w.joints;
-    h.window = {};
+    fold_window(h);
   }
   std::fflush(stdout);
 }
 
 int Probe::run() {
-  if (int rc = create_instance(); rc != kExitOk) return rc;
-  if (int rc = create_session(); rc != kExitOk) return rc;
+  if (int rc = check_extensions(); rc != kExitOk) return rc;
+  const bool vulkan_usable = has_vulkan_ext_ && PROPRIO_HAVE_RENDER;
+  if (args_.session == "headless" && !has_headless_ext_) {
+    logger().error("--session headless: the runtime does not offer XR_MND_headless");
+    return kExitError;
+  }
+  if (args_.session == "vulkan" && !has_vulkan_ext_) {
+    logger().error("--session vulkan: the runtime does not offer XR_KHR_vulkan_enable2");
+    return kExitError;
+  }
+  if (args_.session == "auto" && !has_headless_ext_ && !has_vulkan_ext_) {
+    logger().error("the runtime offers neither XR_MND_headless nor XR_KHR_vulkan_enable2, so xr-probe cannot open a "
+                   "session; test the layer with an app that uses the runtime's graphics API (e.g. hello_xr)");
+    return kExitError;
+  }
+  SessionKind kind = args_.session == "vulkan" ? SessionKind::vulkan
+                     : args_.session == "headless" || has_headless_ext_ ? SessionKind::headless
+                                                                        : SessionKind::vulkan;
+  kind_ = kind;
+  int rc = create_instance(kind);
+  if (rc == kExitOk) rc = create_session(kind);
+  LoopEnd end = LoopEnd::failed;
+  if (rc == kExitOk) end = run_frames();
+  if (rc == kHeadlessRefused || end == LoopEnd::headless_refused) {
+    if (args_.session == "auto" && vulkan_usable) {
+      std::printf("The runtime refuses frames in headless sessions (%s), as Monado does: starting again with a "
+                  "Vulkan graphics binding, as hello_xr -g Vulkan2 does.\n",
+                  refused_call_.c_str());
+      std::fflush(stdout);
+      teardown();  // failures are reported; the Vulkan session is what counts
+      kind = kind_ = SessionKind::vulkan;
+      rc = create_instance(kind);
+      if (rc == kExitOk) rc = create_session(kind);
+      if (rc == kExitOk) end = run_frames();
+    } else {
+      logger().error("the runtime refuses frames in headless sessions ({}), as Monado does. {}", refused_call_,
+                     args_.session == "headless" ? "Run without --session headless (or with --session vulkan)"
+                     : !has_vulkan_ext_          ? "It offers no XR_KHR_vulkan_enable2 to fall back to"
+                                                 : "This build of proprio has no Vulkan renderer to fall back to");
+      return kExitError;
+    }
+  }
+  if (rc != kExitOk) return rc == kHeadlessRefused ? kExitError : rc;
+  return summarise(end);
+}
 
+// Runs the frame loop for --seconds, locating the hands every frame.
+LoopEnd Probe::run_frames() {
   using clock = std::chrono::steady_clock;
   const auto start = clock::now();
   auto window_start = start, last_wait_return = start;
-  std::uint64_t frames = 0;
+  frames_ = 0;
+  // A headless session that cannot run its first frame may be refused by
+  // design (Monado): the caller decides, so that failure is not reported here.
+  auto first_frame_refused = [&](XrResult r, const char* call) {
+    if (kind_ != SessionKind::headless || frames_ > 0 || XR_SUCCEEDED(r)) return false;
+    refused_call_ = std::string(call) + ": " + result_text(r);
+    return true;
+  };
+  LoopEnd end = LoopEnd::completed;
   while (!g_sigint_stop.load() && !exiting_) {
     if (!pump_events()) break;
     const double elapsed = std::chrono::duration<double>(clock::now() - start).count();
@@ -477,30 +722,54 @@ int Probe::run() {
     }
     auto fwi = make<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
     auto fs = make<XrFrameState>(XR_TYPE_FRAME_STATE);
-    if (!ok(xrWaitFrame(session_, &fwi, &fs), "xrWaitFrame")) break;
+    const XrResult waited = xrWaitFrame(session_, &fwi, &fs);
+    if (first_frame_refused(waited, "xrWaitFrame")) return LoopEnd::headless_refused;
+    if (!ok(waited, "xrWaitFrame")) {
+      end = LoopEnd::failed;
+      break;
+    }
     // A headless runtime may not block in xrWaitFrame: pace to its display period (or 90 Hz).
     const double period_s = fs.predictedDisplayPeriod > 0 ? static_cast<double>(fs.predictedDisplayPeriod) * 1e-9 : 1.0 / 90.0;
     const auto period = std::chrono::duration_cast<clock::duration>(std::chrono::duration<double>(period_s));
-    if (frames > 0 && clock::now() - last_wait_return < period / 2) std::this_thread::sleep_until(last_wait_return + period);
+    if (frames_ > 0 && clock::now() - last_wait_return < period / 2) std::this_thread::sleep_until(last_wait_return + period);
     last_wait_return = clock::now();
 
     auto fbi = make<XrFrameBeginInfo>(XR_TYPE_FRAME_BEGIN_INFO);
-    if (!ok(xrBeginFrame(session_, &fbi), "xrBeginFrame")) break;
+    const XrResult begun = xrBeginFrame(session_, &fbi);
+    if (first_frame_refused(begun, "xrBeginFrame")) return LoopEnd::headless_refused;
+    if (!ok(begun, "xrBeginFrame")) {
+      end = LoopEnd::failed;
+      break;
+    }
     XrTime t = fs.predictedDisplayTime;
     if (t <= 0) {
       if (!zero_display_time_reported_) {
-        std::printf("(the runtime's predictedDisplayTime is 0, as headless Monado does: locating at the current time)\n");
+        std::printf("(the runtime's predictedDisplayTime is 0: locating at the current time)\n");
         zero_display_time_reported_ = true;
       }
       t = now();
+      if (t <= 0) {
+        end = LoopEnd::failed;
+        break;
+      }
     }
-    for (auto& h : hands_) locate(h, t);
+    bool located = true;
+    for (auto& h : hands_) located = located && locate(h, t);
+    if (!located) {
+      end = LoopEnd::failed;
+      break;
+    }
     auto fei = make<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
     fei.displayTime = t;
     fei.environmentBlendMode = blend_mode_;
     fei.layerCount = 0;
-    if (!ok(xrEndFrame(session_, &fei), "xrEndFrame")) break;
-    ++frames;
+    const XrResult ended = xrEndFrame(session_, &fei);
+    if (first_frame_refused(ended, "xrEndFrame")) return LoopEnd::headless_refused;
+    if (!ok(ended, "xrEndFrame")) {
+      end = LoopEnd::failed;
+      break;
+    }
+    ++frames_;
 
     const double window_s = std::chrono::duration<double>(clock::now() - window_start).count();
     if (window_s >= 1.0) {
@@ -508,12 +777,18 @@ int Probe::run() {
       window_start = clock::now();
     }
   }
-  const double total_s = std::chrono::duration<double>(clock::now() - start).count();
+  if (failed_) end = LoopEnd::failed;
+  run_s_ = std::chrono::duration<double>(clock::now() - start).count();
   const double tail_s = std::chrono::duration<double>(clock::now() - window_start).count();
-  if (tail_s > 0.2) report_second(total_s, tail_s);
-  if (g_sigint_stop.load()) std::printf("\nInterrupted.\n");
+  // A short tail is not worth a report of its own, but its locates count in the summary.
+  report_second(run_s_, tail_s, tail_s > 0.2);
+  return end;
+}
 
-  std::printf("\nSummary over %.1f s, %llu frames:\n", total_s, static_cast<unsigned long long>(frames));
+int Probe::summarise(LoopEnd end) {
+  if (g_sigint_stop.load()) std::printf("\nInterrupted.\n");
+  std::printf("\nSummary over %.1f s, %llu frames, %s session:\n", run_s_, static_cast<unsigned long long>(frames_),
+              kind_ == SessionKind::headless ? "headless" : "Vulkan");
   bool any_active = false;
   for (const auto& h : hands_) {
     const auto& t = h.total;
@@ -521,9 +796,14 @@ int Probe::run() {
     std::printf("  %-5s active in %llu of %llu locates, joints fully tracked %.1f%%, distinct data %.1f Hz\n", h.name,
                 static_cast<unsigned long long>(t.active), static_cast<unsigned long long>(t.locates),
                 t.joints ? 100.0 * static_cast<double>(t.fully_tracked_joints) / static_cast<double>(t.joints) : 0.0,
-                total_s > 0 ? static_cast<double>(t.distinct) / total_s : 0.0);
+                run_s_ > 0 ? static_cast<double>(t.distinct) / run_s_ : 0.0);
   }
-  teardown();
+  std::fflush(stdout);
+  const bool torn_down = teardown();
+  if (end == LoopEnd::failed || failed_ || !torn_down) {
+    logger().error("xr-probe stopped on the failed call above");
+    return kExitError;
+  }
   if (!any_active) {
     std::printf("No hand was ever active. If Proprio's layer is meant to serve hands, check 'proprio layer status' "
                 "and the app's log for the layer's messages.\n");
@@ -532,11 +812,18 @@ int Probe::run() {
   return kExitOk;
 }
 
-void Probe::teardown() {
-  if (instance_ == XR_NULL_HANDLE) return;
+// Ends and destroys the session, then the Vulkan objects, then the instance,
+// and resets the per-session state (the fallback starts a new session).
+// False when a call failed (reported).
+bool Probe::teardown() {
+  if (instance_ == XR_NULL_HANDLE) return true;
+  bool all_ok = true;
+  auto check = [&](XrResult r, const char* what) { all_ok = ok(r, what) && all_ok; };
   if (session_ != XR_NULL_HANDLE && session_running_) {
     // Ask the runtime to end the session, then follow its state changes to STOPPING.
-    if (ok(xrRequestExitSession(session_), "xrRequestExitSession")) {
+    const XrResult requested = xrRequestExitSession(session_);
+    check(requested, "xrRequestExitSession");
+    if (XR_SUCCEEDED(requested)) {
       const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
       while (session_running_ && !exiting_ && std::chrono::steady_clock::now() < deadline) {
         if (!pump_events()) break;
@@ -554,26 +841,35 @@ void Probe::teardown() {
       }
     }
     if (session_running_) {
-      ok(xrEndSession(session_), "xrEndSession");
+      check(xrEndSession(session_), "xrEndSession");
       session_running_ = false;
     }
   }
   for (auto& h : hands_) {
     if (h.tracker != XR_NULL_HANDLE) {
-      ok(destroy_hand_tracker_(h.tracker), "xrDestroyHandTrackerEXT");
+      check(destroy_hand_tracker_(h.tracker), "xrDestroyHandTrackerEXT");
       h.tracker = XR_NULL_HANDLE;
     }
   }
+  hands_.clear();
   if (space_ != XR_NULL_HANDLE) {
-    ok(xrDestroySpace(space_), "xrDestroySpace");
+    check(xrDestroySpace(space_), "xrDestroySpace");
     space_ = XR_NULL_HANDLE;
   }
   if (session_ != XR_NULL_HANDLE) {
-    ok(xrDestroySession(session_), "xrDestroySession");
+    check(xrDestroySession(session_), "xrDestroySession");
     session_ = XR_NULL_HANDLE;
   }
-  ok(xrDestroyInstance(instance_), "xrDestroyInstance");
+#if PROPRIO_HAVE_RENDER
+  // The app destroys its Vulkan device and instance after the session, before the XrInstance.
+  vulkan_.reset();
+#endif
+  check(xrDestroyInstance(instance_), "xrDestroyInstance");
   instance_ = XR_NULL_HANDLE;
+  state_ = XR_SESSION_STATE_UNKNOWN;
+  exiting_ = false;
+  zero_display_time_reported_ = false;
+  return all_ok;
 }
 
 int run_xr_probe(const ProbeArgs& a) {
@@ -594,20 +890,29 @@ void add_xr_probe_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ProbeArgs>();
   CLI::App* cmd = app.add_subcommand(
       "xr-probe",
-      "Be a minimal OpenXR app: through the system's OpenXR loader, open a headless session on the active runtime "
-      "(XR_MND_headless), create hand trackers (XR_EXT_hand_tracking) and print once a second what they report: "
-      "whether each hand is active, wrist and index-tip positions (mm), palm orientation, the share of joints with "
-      "all location flags, how often joints were located and how often the data actually changed.\n"
+      "Be a minimal OpenXR app: through the system's OpenXR loader, open a session on the active runtime, create "
+      "hand trackers (XR_EXT_hand_tracking) and print once a second what they report: whether each hand is active, "
+      "wrist and index-tip positions (mm), palm orientation, the share of joints with all location flags, how often "
+      "joints were located and how often the data actually changed.\n"
+      "The session is headless (XR_MND_headless) when the runtime offers it. When a headless session cannot run "
+      "frames (Monado refuses xrBeginFrame there), or the runtime has no headless mode, the probe uses a Vulkan "
+      "graphics binding (XR_KHR_vulkan_enable2) instead, and says which it used.\n"
       "Enabled API layers (Proprio's included, see 'proprio layer status') apply as for any app. Ctrl-C ends it "
       "cleanly.\n"
-      "Exit status: 0 a hand was active, 1 error, 2 no hand tracking offered or supported, 3 no hand was ever "
-      "active.");
+      "Exit status: 0 a hand was active and no call failed; 1 an error, including any failed OpenXR call (reported with its XrResult); "
+      "2 XR_EXT_hand_tracking not offered, or supportsHandTracking false; 3 the run completed without a failed "
+      "call but no hand was ever active.");
   cmd->add_option("--seconds", args->seconds, "How long to run, s")->check(CLI::Range(0.0, 24.0 * 3600.0))->capture_default_str();
   cmd->add_option("--space", args->space, "Reference space to locate the joints in")
       ->check(CLI::IsMember({"view", "local", "stage"}))
       ->capture_default_str();
   cmd->add_option("--hand", args->hand, "Which hand trackers to create")
       ->check(CLI::IsMember({"left", "right", "both"}))
+      ->capture_default_str();
+  cmd->add_option("--session", args->session,
+                  "auto: headless when offered, else (or when the runtime refuses headless frames) a Vulkan graphics "
+                  "binding; headless or vulkan: only that kind")
+      ->check(CLI::IsMember({"auto", "headless", "vulkan"}))
       ->capture_default_str();
   cmd->add_flag("--enable-layer", args->enable_layer,
                 "Enable XR_APILAYER_PROPRIO_hand_tracking from the app side (enabledApiLayerNames), as an app "

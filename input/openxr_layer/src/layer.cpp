@@ -119,9 +119,9 @@ XrResult guarded(const char* function, F&& body) noexcept {
   try {
     return body();
   } catch (const std::exception& e) {
-    try { logger().error("{}: internal error: {}", function, e.what()); } catch (...) {}
+    try { logger().error("Proprio layer: {}: internal error: {}", function, e.what()); } catch (...) {}
   } catch (...) {
-    try { logger().error("{}: unknown internal error", function); } catch (...) {}
+    try { logger().error("Proprio layer: {}: unknown internal error", function); } catch (...) {}
   }
   return XR_ERROR_RUNTIME_FAILURE;
 }
@@ -156,7 +156,7 @@ void start_sources(Instance& inst) {
   const auto path = default_layer_config_path();
   auto cfg = load_layer_config(path);
   if (!cfg) {
-    logger().error("Proprio hand-tracking layer: {}. Proprio serves no hands (a runtime's own hand tracking, "
+    logger().error("Proprio layer: {}. Proprio serves no hands (a runtime's own hand tracking, "
                    "if any, passes through). Write a config with 'proprio layer init-config'.",
                    cfg.error().message);
     return;
@@ -180,7 +180,7 @@ void start_sources(Instance& inst) {
     }
     inst.sources.push_back(std::move(source));
   }
-  logger().info("Proprio hand-tracking layer: {}", inst.config.describe());
+  logger().info("Proprio layer: {}", inst.config.describe());
 }
 
 Instance* find_instance_locked(XrInstance handle) {

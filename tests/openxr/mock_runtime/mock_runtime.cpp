@@ -406,6 +406,9 @@ struct SessionState {
   uint64_t projection_layers = 0;
   uint32_t frames_captured = 0;
   uint32_t exit_after_frames = 0;  // 0: never
+  // PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS=1 on a headless session: frames are
+  // refused as Monado refuses them (see xrWaitFrame).
+  bool monado_headless = false;
   std::string capture_dir;         // empty: no capture
   uint32_t capture_frames = kDefaultCaptureFrames;  // 0: every frame
 };
@@ -1089,6 +1092,8 @@ XrResult xrCreateSession(XrInstance instance, const XrSessionCreateInfo* info, X
   session_state.instance = instance_id;
   session_state.vulkan = std::move(vulkan);
   session_state.exit_after_frames = env_uint("PROPRIO_MOCK_RUNTIME_EXIT_AFTER_FRAMES", 0).value_or(0);
+  session_state.monado_headless =
+      session_state.vulkan == nullptr && env_is_one("PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS");
   if (const char* dir = std::getenv("PROPRIO_MOCK_RUNTIME_CAPTURE_DIR")) session_state.capture_dir = dir;
   session_state.capture_frames =
       env_uint("PROPRIO_MOCK_RUNTIME_CAPTURE_FRAMES", kDefaultCaptureFrames).value_or(kDefaultCaptureFrames);
@@ -1251,6 +1256,16 @@ XrResult xrWaitFrame(XrSession session, const XrFrameWaitInfo* info, XrFrameStat
       return XR_ERROR_VALIDATION_FAILURE;
     }
     if (!state->running) return XR_ERROR_SESSION_NOT_RUNNING;
+    if (state->monado_headless) {
+      // Monado's headless session has no compositor: xrWaitFrame returns at
+      // once without starting a frame (no display time, shouldRender false),
+      // so the xrBeginFrame that follows fails with XR_ERROR_CALL_ORDER_INVALID
+      // (frame_waited stays false) and so does xrEndFrame.
+      frame_state->predictedDisplayTime = 0;
+      frame_state->predictedDisplayPeriod = 0;
+      frame_state->shouldRender = XR_FALSE;
+      return XR_SUCCESS;
+    }
   }
   // Throttle to 90 Hz without holding the lock: other threads keep working.
   const int64_t tick = mx::next_frame_tick(mx::monotonic_now_ns());

@@ -43,6 +43,7 @@ class MockRuntime : public ::testing::Test {
   ScopedEnv runtime_{"XR_RUNTIME_JSON", PROPRIO_MOCK_RUNTIME_JSON};
   ScopedEnv layers_{"XR_ENABLE_API_LAYERS", nullptr};
   ScopedEnv hand_tracking_{"PROPRIO_MOCK_RUNTIME_HAND_TRACKING", nullptr};
+  ScopedEnv monado_headless_{"PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS", nullptr};
 };
 
 void expect_near(const XrVector3f& a, const XrVector3f& b, float tol = 1e-5f) {
@@ -541,6 +542,47 @@ TEST_F(MockRuntime, ExitsAfterFrames) {
             (std::vector{XR_SESSION_STATE_VISIBLE, XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_STOPPING}));
   ASSERT_EQ(xrEndSession(session), XR_SUCCESS);
   EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_IDLE, XR_SESSION_STATE_EXITING}));
+  EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
+  EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+// PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS=1: a headless session refuses frames
+// as Monado's does (xrWaitFrame returns at once without starting a frame, and
+// xrBeginFrame answers XR_ERROR_CALL_ORDER_INVALID); the rest of the session
+// (spaces, exit) still works. Without the variable the same calls succeed
+// (ExitsAfterFrames).
+TEST_F(MockRuntime, MonadoHeadlessRefusesFrames) {
+  ScopedEnv monado("PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS", "1");
+  XrInstance instance = XR_NULL_HANDLE;
+  ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+  auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  session_info.systemId = get_hmd(instance);
+  XrSession session = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+  auto begin_info = make<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
+  begin_info.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+  ASSERT_EQ(xrBeginSession(session, &begin_info), XR_SUCCESS);
+  drain_states(instance);
+  for (int i = 0; i < 3; ++i) {
+    auto frame_state = make<XrFrameState>(XR_TYPE_FRAME_STATE);
+    frame_state.predictedDisplayTime = 123;  // overwritten with 0
+    frame_state.shouldRender = XR_TRUE;
+    ASSERT_EQ(xrWaitFrame(session, nullptr, &frame_state), XR_SUCCESS);
+    EXPECT_EQ(frame_state.predictedDisplayTime, 0);
+    EXPECT_EQ(frame_state.predictedDisplayPeriod, 0);
+    EXPECT_EQ(frame_state.shouldRender, XR_FALSE);
+    EXPECT_EQ(xrBeginFrame(session, nullptr), XR_ERROR_CALL_ORDER_INVALID);
+    auto end_info = make<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+    end_info.displayTime = 1;
+    end_info.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+    EXPECT_EQ(xrEndFrame(session, &end_info), XR_ERROR_CALL_ORDER_INVALID);
+  }
+  XrSpace view = create_space(session, XR_REFERENCE_SPACE_TYPE_VIEW);
+  EXPECT_NE(view, XR_NULL_HANDLE);
+  EXPECT_EQ(xrDestroySpace(view), XR_SUCCESS);
+  ASSERT_EQ(xrRequestExitSession(session), XR_SUCCESS);
+  EXPECT_EQ(drain_states(instance).back(), XR_SESSION_STATE_STOPPING);
+  EXPECT_EQ(xrEndSession(session), XR_SUCCESS);
   EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
   EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
 }

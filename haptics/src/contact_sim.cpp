@@ -500,6 +500,13 @@ Vec3 vec_from(const mjtNum* v) { return Vec3(v[0], v[1], v[2]); }
 
 bool finite_pose(const Pose& T) { return T.p.allFinite() && T.q.coeffs().allFinite() && T.q.norm() > 0.5; }
 
+// First-order low-pass, one step: y += alpha (x - y), per component.
+void low_pass(FingertipForce& y, const FingertipForce& x, double alpha) noexcept {
+  y.normal_n += alpha * (x.normal_n - y.normal_n);
+  y.shear_x_n += alpha * (x.shear_x_n - y.shear_x_n);
+  y.shear_z_n += alpha * (x.shear_z_n - y.shear_z_n);
+}
+
 }  // namespace
 
 struct ContactSimulation::Impl {
@@ -605,8 +612,11 @@ struct ContactSimulation::Impl {
   }
 
   void update_fingertips() {
-    std::array<Vec3, kFingerCount> f_world;
+    std::array<Vec3, kFingerCount> f_world, f_on_pad;
     f_world.fill(Vec3::Zero());
+    f_on_pad.fill(Vec3::Zero());
+    std::array<Quat, kFingerCount> q_tip_world;
+    for (std::size_t fi = 0; fi < kFingerCount; ++fi) q_tip_world[fi] = quat_from(data->xquat + 4 * tip_body[fi]).conjugate();
     std::array<int, kFingerCount> count{};
     std::array<double, kFingerCount> depth{}, pressing{}, pressing_objects{};
     for (int i = 0; i < data->ncon; ++i) {
@@ -620,27 +630,28 @@ struct ContactSimulation::Impl {
       // points from geom1 to geom2 and the force acts on geom2 (-f on geom1).
       Vec3 f = Vec3::Zero();
       for (int r = 0; r < 3; ++r) f += local[r] * Vec3(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
-      const auto add = [&](int finger, const Vec3& force, int other_geom) {
+      const Vec3 n(c.frame[0], c.frame[1], c.frame[2]);
+      // `into` is the way the normal force pushes the finger: +n on geom2, -n on geom1.
+      const auto add = [&](int finger, const Vec3& force, const Vec3& into, int other_geom) {
         const auto fi = static_cast<std::size_t>(finger);
         f_world[fi] += force;
+        f_on_pad[fi] += felt_on_pad(q_tip_world[fi] * force, q_tip_world[fi] * into).in_tip_frame();
         ++count[fi];
         depth[fi] = std::max(depth[fi], -c.dist);
         pressing[fi] += local[0];
         if (geom_on_free_object[static_cast<std::size_t>(other_geom)]) pressing_objects[fi] += local[0];
       };
-      if (f2 >= 0) add(f2, f, c.geom1);
-      if (f1 >= 0) add(f1, -f, c.geom2);
+      if (f2 >= 0) add(f2, f, n, c.geom1);
+      if (f1 >= 0) add(f1, -f, -n, c.geom2);
     }
     const double dt = options.timestep_s, tau = options.force_filter_time_constant_s;
     const double alpha = dt / (tau + dt);
     for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
       FingertipContact& tip = tips[fi];
-      const Quat q_world_tip = quat_from(data->xquat + 4 * tip_body[fi]);
       tip.f_in_world = f_world[fi];
-      tip.raw = FingertipForce::from_tip_frame(q_world_tip.conjugate() * f_world[fi]);
-      tip.force.normal_n += alpha * (tip.raw.normal_n - tip.force.normal_n);
-      tip.force.shear_x_n += alpha * (tip.raw.shear_x_n - tip.force.shear_x_n);
-      tip.force.shear_z_n += alpha * (tip.raw.shear_z_n - tip.force.shear_z_n);
+      tip.raw = FingertipForce::from_tip_frame(q_tip_world[fi] * f_world[fi]);
+      low_pass(tip.force, tip.raw, alpha);
+      low_pass(tip.on_pad, FingertipForce::from_tip_frame(f_on_pad[fi]), alpha);
       tip.contact_normal_n += alpha * (pressing[fi] - tip.contact_normal_n);
       tip.object_normal_n += alpha * (pressing_objects[fi] - tip.object_normal_n);
       tip.contact_count = count[fi];

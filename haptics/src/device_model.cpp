@@ -21,12 +21,6 @@ std::string text(const char* format, double v) {
   return buf;
 }
 
-std::string join(const std::vector<std::string_view>& names) {
-  std::string out;
-  for (const auto& n : names) out += (out.empty() ? "" : ", ") + std::string(n);
-  return out;
-}
-
 constexpr const char* kDocs = "see docs/haptic-devices.md";
 
 // Reads one device file. Every key is checked for presence, type and range

@@ -38,6 +38,7 @@ AnalyticContact law_force(const ContactLawOptions& law, double penetration_m, co
   const double magnitude = std::min(law.max_force_n, law.onset_force_n + law.stiffness_n_per_m * penetration_m);
   c.f_in_world = magnitude * n_in_world;
   c.force = FingertipForce::from_tip_frame(q_world_tip.conjugate() * c.f_in_world);
+  c.on_pad = felt_on_pad(q_world_tip.conjugate() * c.f_in_world, q_world_tip.conjugate() * n_in_world);
   return c;
 }
 

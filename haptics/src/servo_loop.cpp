@@ -163,14 +163,17 @@ void ServoLoop::tick(TimeNs now) noexcept {
   for (std::size_t i = 0; i < snap.object_count; ++i) snap.object_poses[i] = simulation_.free_object_pose(i);
   for (std::size_t f = 0; f < kFingerCount; ++f) {
     snap.contact[f] = simulation_.fingertips()[f].force;
+    snap.on_pad[f] = simulation_.fingertips()[f].on_pad;
     snap.contact_normal_n[f] = simulation_.fingertips()[f].contact_normal_n;
     snap.object_normal_n[f] = simulation_.fingertips()[f].object_normal_n;
   }
   for (std::size_t i = 0; i < channels_.size(); ++i) {
     const ServoChannel& c = channels_[i];
     SafetyGate& gate = gates_[i];
+    // The device presses on the pad: it gets the contacts as the pad feels
+    // them, so a press on the tip's end is rendered, not read as a pull.
     const FingertipForce desired =
-        options_.haptics_enabled ? scaled(simulation_.fingertip(c.finger).force, options_.force_scale) : FingertipForce{};
+        options_.haptics_enabled ? scaled(simulation_.fingertip(c.finger).on_pad, options_.force_scale) : FingertipForce{};
     gate.command(desired, now);
     const FingertipForce out = gate.output(now);
     const bool enabled = gate.engaged();

@@ -196,6 +196,9 @@ TEST(ContactSim, SlidingGivesShearOpposingTheMotionWithinTheFrictionCone) {
   ASSERT_GT(pressed_tip.contact_count, 0);
   EXPECT_NEAR(pressed_tip.contact_normal_n, pressed_tip.f_in_world.y(), 0.05 * pressed_tip.f_in_world.y());
   EXPECT_LT(pressed_tip.force.normal_n, 0.98 * pressed_tip.contact_normal_n);
+  // As the pad feels it (what a device gets): the whole normal force is
+  // pressure, more than the pad frame's projection.
+  EXPECT_NEAR(pressed_tip.on_pad.normal_n, pressed_tip.contact_normal_n, 1e-9 + 1e-9 * pressed_tip.contact_normal_n);
   EXPECT_EQ(pressed_tip.object_normal_n, 0.0) << "a fixed table is not a held object";
   int touching = 0, sliding_samples = 0;
   for (int i = 0; i < 600; ++i) {
@@ -211,6 +214,8 @@ TEST(ContactSim, SlidingGivesShearOpposingTheMotionWithinTheFrictionCone) {
     ASSERT_GT(normal, 0.0);
     EXPECT_LE(tangential.norm(), mu * normal * 1.02 + 1e-6) << "step " << i;
     EXPECT_LT(f.x(), 0.0) << "shear must oppose the +x motion, step " << i;
+    EXPECT_LE(tip.on_pad.shear_magnitude_n(), mu * tip.on_pad.normal_n * 1.05 + 1e-3)
+        << "felt on the pad, the friction stays within its cone, step " << i;
     if (tangential.norm() > 0.8 * mu * normal) ++sliding_samples;
   }
   EXPECT_GT(touching, 360);
@@ -411,6 +416,40 @@ TEST(ContactSim, RejectsBadOptionsAndNonFiniteTargets) {
   EXPECT_LT((sim->proxy_wrist().p - before.p).norm(), 1e-6);
 }
 
+// felt_on_pad(): a contact anywhere on the fingertip is felt as pad pressure
+// (its normal force) plus shear (its friction), magnitude kept.
+TEST(FeltOnPad, RollsEachContactOntoThePadKeepingItsMagnitude) {
+  const auto expect_force = [](const FingertipForce& f, double normal, double x, double z, const char* what) {
+    EXPECT_NEAR(f.normal_n, normal, 1e-12) << what;
+    EXPECT_NEAR(f.shear_x_n, x, 1e-12) << what;
+    EXPECT_NEAR(f.shear_z_n, z, 1e-12) << what;
+  };
+  // On the pad (normal +Y): unchanged.
+  expect_force(felt_on_pad(Vec3(0.2, 1.5, -0.3), Vec3::UnitY()), 1.5, 0.2, -0.3, "pad");
+  // On the tip's end (the surface pushes along +Z, toward the wrist): 16 N
+  // along the finger's axis is 16 N of pad pressure; the fingertip frame's
+  // projection reads zero normal.
+  expect_force(felt_on_pad(Vec3(0, 0, 16.0), Vec3::UnitZ()), 16.0, 0.0, 0.0, "tip end");
+  EXPECT_EQ(FingertipForce::from_tip_frame(Vec3(0, 0, 16.0)).normal_n, 0.0);
+  // The end's friction toward the nail (+Y) rolls round the tip onto the pad
+  // as shear toward the fingertip (-Z); across the finger (X) it stays X.
+  expect_force(felt_on_pad(Vec3(0.1, 0.5, 4.0), Vec3::UnitZ()), 4.0, 0.1, -0.5, "tip end with friction");
+  // On the side (+X): pressure, its friction along the finger stays along Z.
+  expect_force(felt_on_pad(Vec3(2.0, 0, 0.3), Vec3::UnitX()), 2.0, 0.0, 0.3, "side");
+  // On the nail (-Y): no unique roll; pressure all the same.
+  expect_force(felt_on_pad(Vec3(0.1, -3.0, 0.2), -Vec3::UnitY()), 3.0, -0.1, 0.2, "nail");
+  // Any normal: the contact's normal force becomes the pad pressure, its
+  // friction the shear, and the magnitude is kept.
+  for (int i = 0; i < 200; ++i) {
+    const Vec3 n = Vec3(std::sin(0.7 * i), std::cos(1.3 * i), std::sin(2.1 * i + 0.4)).normalized();
+    const Vec3 f = 3.0 * n + Vec3(std::cos(0.9 * i), std::sin(0.5 * i), std::cos(1.7 * i)).cross(n);
+    const FingertipForce p = felt_on_pad(f, n);
+    EXPECT_NEAR(p.normal_n, f.dot(n), 1e-9) << i;
+    EXPECT_NEAR(p.in_tip_frame().norm(), f.norm(), 1e-9) << i;
+  }
+  EXPECT_FALSE(felt_on_pad(Vec3(std::nan(""), 0, 1), Vec3::UnitZ()).is_finite());
+}
+
 TEST(ForceLaws, HalfCylinderLawMatchesItsFormula) {
   ContactLawOptions law;  // F0 0.45 N, K 4.2 N/m
   HalfCylinderShape cyl;
@@ -433,6 +472,16 @@ TEST(ForceLaws, HalfCylinderLawMatchesItsFormula) {
   EXPECT_NEAR(c.f_in_world.norm(), F, 1e-12);
   EXPECT_NEAR(c.force.normal_n, F * std::cos(a), 1e-12);
   EXPECT_NEAR(c.force.shear_x_n, F * std::sin(a), 1e-12);
+  EXPECT_NEAR(c.on_pad.normal_n, F, 1e-12) << "felt on the pad: all pressure (the law has no friction)";
+  EXPECT_NEAR(c.on_pad.shear_magnitude_n(), 0.0, 1e-12);
+  // The finger pointing straight down into the cylinder: the tip's end
+  // touches, the fingertip frame reads no normal force, the pad feels all of it.
+  const Quat q_pointing_down(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX()));  // tip frame +Z (to the wrist) up
+  c = sphere_on_half_cylinder(law, cyl, Vec3(0, 0.75 + 0.25 + r - 0.02, -0.55), r, q_pointing_down);
+  ASSERT_TRUE(c.in_contact);
+  EXPECT_NEAR(c.force.normal_n, 0.0, 1e-12);
+  EXPECT_NEAR(c.force.shear_z_n, 0.45 + 4.2 * 0.02, 1e-12);
+  EXPECT_NEAR(c.on_pad.normal_n, 0.45 + 4.2 * 0.02, 1e-12);
   // Not touching: nothing.
   EXPECT_FALSE(sphere_on_half_cylinder(law, cyl, Vec3(0, 0.75 + 0.25 + r + 0.001, -0.55), r, q_pad_down).in_contact);
   // Beyond the end cap: nothing.

@@ -2,7 +2,10 @@
 // gates and device models to the sinks; study conditions; shutdown zeroes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <functional>
 #include <thread>
 
 #include "proprio/haptics/emulated_fingertip.hpp"
@@ -72,8 +75,8 @@ TEST(ServoLoop, PressingTheTableReachesTheDeviceThroughTheGate) {
   const ServoSnapshot* snap = rig.loop->latest();
   ASSERT_NE(snap, nullptr);
   EXPECT_GT(snap->contact[1].normal_n, 0.3) << "index presses the table";
-  EXPECT_NEAR(rig.index_sink->measured().normal_n, snap->contact[1].normal_n,
-              0.05 * snap->contact[1].normal_n + 0.02) << "the device gets the simulation's force, ramped in";
+  EXPECT_NEAR(rig.index_sink->measured().normal_n, snap->on_pad[1].normal_n, 0.05 * snap->on_pad[1].normal_n + 0.02)
+      << "the device gets the simulation's force as the pad feels it, ramped in";
   EXPECT_TRUE(rig.index_sink->last_enabled());
   EXPECT_EQ(snap->channels[0].gate, GateState::active);
   EXPECT_LE(rig.index_sink->measured().normal_n, rig.loop->gate(0).limits().max_normal_n);
@@ -100,8 +103,8 @@ TEST(ServoLoop, ForceScaleScalesWhatTheDeviceGetsNotTheSimulation) {
   full.loop->engage(kNsPerSecond);
   half.run(0.0, 2.0);
   full.run(0.0, 2.0);
-  const double simulated = half.loop->latest()->contact[1].normal_n;
-  EXPECT_NEAR(simulated, full.loop->latest()->contact[1].normal_n, 1e-9) << "the simulation does not see the scale";
+  const double simulated = half.loop->latest()->on_pad[1].normal_n;
+  EXPECT_NEAR(simulated, full.loop->latest()->on_pad[1].normal_n, 1e-9) << "the simulation does not see the scale";
   ASSERT_GT(simulated, 0.3);
   ASSERT_LT(simulated, 2.0 * half.loop->gate(0).limits().max_normal_n) << "else the clamp hides the scale";
   EXPECT_NEAR(half.index_sink->measured().normal_n, 0.5 * simulated, 0.03 * simulated + 0.01);
@@ -195,6 +198,111 @@ TEST(ServoLoop, EmulatedPlatformDeviceRendersTheCommandedForceOnItsSensors) {
   rig.loop->disengage_and_zero(3 * kNsPerSecond);
   for (int i = 1; i <= 200; ++i) rig.loop->tick(3 * kNsPerSecond + i * kNsPerMillisecond);
   EXPECT_LT(sink->measured().normal_n, 0.02);
+}
+
+// The demo's press (`proprio haptics sim`, default options): the pitched
+// index finger meets the study's half cylinder with the end of its tip, the
+// net contact force (16 N) runs along the finger's axis and the fingertip
+// frame's normal is near zero or negative. The device must render the press
+// all the same. TipEndPress runs one period of the script (approach, press,
+// slide, lift) and compares, tick by tick, what the gate commands with what
+// the device should render: `expected` (clamped to the device's normal limit)
+// slewed at the device's rate limit, the gate's own limits, which stay.
+struct TipEndPress {
+  double max_deficit_n = 0.0, worst_t_s = 0.0;  // largest (reference - rendered) while in contact
+  double max_excess_n = 0.0;                    // largest (rendered - reference - what shear may add)
+  int pressing_ticks = 0, end_on_ticks = 0;
+  double peak_contact_n = 0.0, peak_commanded_n = 0.0;
+  std::uint64_t resets = 0;
+};
+
+TipEndPress press_the_tip_end(const std::shared_ptr<const FingertipDeviceModel>& device,
+                              const std::function<double(const ServoSnapshot&)>& expected,
+                              const std::function<double(const FingertipForce&)>& rendered) {
+  TipEndPress r;
+  const HandModel model(*HandShape::from_measurements(0.19, 0.09));
+  const HapticScene scene = HapticScene::half_cylinder_study();
+  const SceneObject& cylinder = *scene.find("half_cylinder");
+  auto sim = ContactSimulation::create(model, Handedness::right, scene);
+  EXPECT_TRUE(sim) << sim.error().message;
+  if (!sim) return r;
+  TouchScriptOptions to;  // the demo's press depth
+  to.p_surface_in_world = cylinder.T_world_object.p + Vec3(0, cylinder.radius_m, 0);
+  const TouchScript script(sim->hand_model(), Handedness::right, to);
+  Pose T;
+  HandAngles a;
+  script.at(0.0, T, a);
+  sim->reset_hand(T, a);
+  const DeviceLimits limits = device->limits();
+  std::vector<ServoChannel> channels(1);
+  channels[0].finger = Finger::index;
+  channels[0].model = device;
+  channels[0].sink = std::make_shared<RecordingSink>();
+  auto loop = ServoLoop::create(std::move(*sim), std::move(channels));
+  EXPECT_TRUE(loop) << loop.error().message;
+  if (!loop) return r;
+  ServoLoop& servo = **loop;
+  const TimeNs t0 = kNsPerSecond;
+  servo.engage(t0);  // the ramp-in ends long before the touch
+  double reference = 0.0;
+  const double dt = 1e-3;
+  for (int i = 0; i < static_cast<int>(to.period_s / dt); ++i) {
+    const double t = i * dt;
+    const TimeNs now = t0 + static_cast<TimeNs>(i) * kNsPerMillisecond;
+    script.at(t, T, a);
+    servo.submit_tracked_hand(now, T, a);
+    servo.tick(now);
+    const ServoSnapshot& snap = *servo.latest();
+    const FingertipForce contact = snap.contact[1];
+    const double contact_n = contact.in_tip_frame().norm();
+    const FingertipForce commanded = snap.channels[0].commanded;
+    const double step = limits.max_rate_n_per_s * dt;
+    reference += std::clamp(std::min(expected(snap), limits.max_normal_n) - reference, -step, step);
+    r.peak_contact_n = std::max(r.peak_contact_n, contact_n);
+    r.peak_commanded_n = std::max(r.peak_commanded_n, commanded.in_tip_frame().norm());
+    EXPECT_LE(commanded.normal_n, limits.max_normal_n + 1e-9) << "t " << t;
+    EXPECT_LE(commanded.shear_magnitude_n(), limits.max_shear_n + 1e-9) << "t " << t;
+    r.max_excess_n = std::max(r.max_excess_n, rendered(commanded) - std::hypot(reference, limits.max_shear_n));
+    if (contact_n < 0.05) continue;
+    ++r.pressing_ticks;
+    if (contact.normal_n <= 0.1 * contact_n && contact_n > 1.0) ++r.end_on_ticks;
+    const double deficit = reference - rendered(commanded);
+    if (deficit > r.max_deficit_n) r.max_deficit_n = deficit, r.worst_t_s = t;
+  }
+  r.resets = servo.simulation().stats().instability_resets;
+  return r;
+}
+
+// A 3-DOF force device renders the vector: its magnitude follows the contact
+// force's magnitude up to the device's limit.
+TEST(ServoLoop, ATipEndPressIsRenderedAsTheContactForcesMagnitudeThroughout) {
+  auto device = force_vector_device();
+  const double max_normal = device->limits().max_normal_n;
+  const TipEndPress r = press_the_tip_end(
+      device, [](const ServoSnapshot& s) { return s.contact[1].in_tip_frame().norm(); },
+      [](const FingertipForce& f) { return f.in_tip_frame().norm(); });
+  ASSERT_GT(r.pressing_ticks, 1500) << "the script presses for most of a period";
+  ASSERT_GT(r.end_on_ticks, 100) << "the press is on the tip's end (else this tests nothing new)";
+  EXPECT_GT(r.peak_contact_n, 3.0 * max_normal) << "a hard press, well beyond the device's range";
+  EXPECT_LT(r.max_deficit_n, 0.05 * max_normal) << "worst at t " << r.worst_t_s << " s";
+  EXPECT_LT(r.max_excess_n, 0.05 * max_normal);
+  EXPECT_GT(r.peak_commanded_n, 0.99 * max_normal);
+  EXPECT_EQ(r.resets, 0u);
+}
+
+// The demo's band renders pressure and shear along the finger only: its
+// pressure follows the contact's normal force (all of it, wherever on the
+// fingertip) up to the device's limit.
+TEST(ServoLoop, ATipEndPressIsRenderedAsPadPressureOnTheBand) {
+  auto device = shipped_device("band_2dof");
+  const double max_normal = device->limits().max_normal_n;
+  const TipEndPress r = press_the_tip_end(
+      device, [](const ServoSnapshot& s) { return s.contact_normal_n[1]; },
+      [](const FingertipForce& f) { return f.normal_n; });
+  ASSERT_GT(r.end_on_ticks, 100);
+  EXPECT_LT(r.max_deficit_n, 0.05 * max_normal) << "worst at t " << r.worst_t_s << " s";
+  EXPECT_LT(r.max_excess_n, 0.05 * max_normal);
+  EXPECT_EQ(r.resets, 0u);
 }
 
 TEST(ServoLoop, RejectsBadChannels) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/haptics/contact_sim.hpp"
 #include "proprio/haptics/device_model.hpp"
@@ -91,6 +92,13 @@ int run_sim(const SimArgs& a) {
   auto device = load_device_model(a.device);
   if (!device) return report_error(device.error());
   std::shared_ptr<const FingertipDeviceModel> model(std::move(*device));
+  // Refused outputs (an input file, a device) fail before the simulation runs.
+  if (!a.csv.empty()) {
+    if (auto st = check_output_path(a.csv, "CSV output"); !st) return report_error(st.error());
+  }
+  if (!a.plot.empty()) {
+    if (auto st = check_output_path(a.plot, "plot"); !st) return report_error(st.error());
+  }
   const HandModel hand = cli_hand(a.hand_length_m, a.hand_width_m);
   auto sim = ContactSimulation::create(hand, Handedness::right, scene->scene);
   if (!sim) return report_error(sim.error());
@@ -119,17 +127,24 @@ int run_sim(const SimArgs& a) {
 
   // Simulated time at 1 kHz, as fast as the machine goes.
   const auto steps = static_cast<int>(a.seconds * 1000.0);
-  PlotSeries contact_n{"contact normal (simulation)", {}, {}}, contact_s{"contact shear |t|", {}, {}};
-  PlotSeries cmd_n{"commanded normal (after safety gate)", {}, {}}, meas_n{"emulated device FSR normal", {}, {}};
-  PlotSeries tracked_depth{"tracked fingertip", {}, {}}, proxy_depth{"proxy fingertip (contact penetration)", {}, {}};
+  // Legends stay short: the plot's legend column is 170 px wide.
+  PlotSeries contact_f{"contact |F| (MuJoCo)", {}, {}}, tip_n{"F along pad normal", {}, {}};
+  PlotSeries pad_n{"pad pressure (felt)", {}, {}}, cmd_f{"commanded |F|", {}, {}};
+  PlotSeries meas_n{"device sensors, normal", {}, {}};
+  PlotSeries tracked_depth{"tracked fingertip", {}, {}}, proxy_depth{"proxy (penetration)", {}, {}};
   std::ofstream csv;
   if (!a.csv.empty()) {
     csv.open(a.csv);
     if (!csv) return report_error(make_error(Errc::io_error, "cannot write " + a.csv));
-    csv << "t_s,contact_normal_n,contact_shear_x_n,contact_shear_z_n,commanded_normal_n,commanded_shear_x_n,"
-           "commanded_shear_z_n,device_normal_n,tracked_depth_m,proxy_depth_m\n";
+    csv << "t_s,contact_force_n,contact_normal_sum_n,tip_frame_normal_n,tip_frame_shear_x_n,tip_frame_shear_z_n,"
+           "pad_normal_n,pad_shear_x_n,pad_shear_z_n,commanded_normal_n,commanded_shear_x_n,commanded_shear_z_n,"
+           "device_normal_n,tracked_depth_m,proxy_depth_m\n";
   }
-  double peak = 0, max_tracked_depth = 0, max_proxy_depth = 0;
+  struct Peaks {
+    double contact_force = 0, contact_normal_sum = 0, pad_normal = 0, pad_shear = 0;
+    double commanded_force = 0, commanded_normal = 0, commanded_shear = 0, device_normal = 0;
+    double tracked_depth = 0, proxy_depth = 0;
+  } peak;
   const TimeNs t0 = kNsPerSecond;
   servo.engage(t0);
   const auto wall_start = std::chrono::steady_clock::now();
@@ -140,35 +155,50 @@ int run_sim(const SimArgs& a) {
     servo.submit_tracked_hand(now, T, angles);
     servo.tick(now);
     const ServoSnapshot* snap = servo.latest();
-    const FingertipForce c = snap->contact[static_cast<std::size_t>(Finger::index)];
+    constexpr auto kIndex = static_cast<std::size_t>(Finger::index);
+    const FingertipForce c = snap->contact[kIndex];
+    const FingertipForce pad = snap->on_pad[kIndex];
+    const double contact_force = c.in_tip_frame().norm();
     const auto& ch = snap->channels[0];
+    const double commanded_force = ch.commanded.in_tip_frame().norm();
     const HandPose tracked = hand.forward(Handedness::right, angles, T, now);
     const double r = tracked.radius_m[index_of(HandJoint::index_tip)];
     const double tracked_below = scene->depth(tracked.joint(HandJoint::index_tip).p, r);
     const double proxy_below = servo.simulation().fingertip(Finger::index).max_penetration_m;
-    peak = std::max(peak, c.normal_n);
-    max_tracked_depth = std::max(max_tracked_depth, tracked_below);
-    max_proxy_depth = std::max(max_proxy_depth, proxy_below);
+    peak.contact_force = std::max(peak.contact_force, contact_force);
+    peak.contact_normal_sum = std::max(peak.contact_normal_sum, snap->contact_normal_n[kIndex]);
+    peak.pad_normal = std::max(peak.pad_normal, pad.normal_n);
+    peak.pad_shear = std::max(peak.pad_shear, pad.shear_magnitude_n());
+    peak.commanded_force = std::max(peak.commanded_force, commanded_force);
+    peak.commanded_normal = std::max(peak.commanded_normal, ch.commanded.normal_n);
+    peak.commanded_shear = std::max(peak.commanded_shear, ch.commanded.shear_magnitude_n());
+    peak.device_normal = std::max(peak.device_normal, ch.measured.normal_n);
+    peak.tracked_depth = std::max(peak.tracked_depth, tracked_below);
+    peak.proxy_depth = std::max(peak.proxy_depth, proxy_below);
     if (i % 5 == 0) {
-      contact_n.x.push_back(t), contact_n.y.push_back(c.normal_n);
-      contact_s.x.push_back(t), contact_s.y.push_back(c.shear_magnitude_n());
-      cmd_n.x.push_back(t), cmd_n.y.push_back(ch.commanded.normal_n);
+      contact_f.x.push_back(t), contact_f.y.push_back(contact_force);
+      tip_n.x.push_back(t), tip_n.y.push_back(c.normal_n);
+      pad_n.x.push_back(t), pad_n.y.push_back(pad.normal_n);
+      cmd_f.x.push_back(t), cmd_f.y.push_back(commanded_force);
       meas_n.x.push_back(t), meas_n.y.push_back(ch.measured.normal_n);
       tracked_depth.x.push_back(t), tracked_depth.y.push_back(tracked_below * 1e3);
       proxy_depth.x.push_back(t), proxy_depth.y.push_back(proxy_below * 1e3);
     }
     if (csv) {
-      csv << t << ',' << c.normal_n << ',' << c.shear_x_n << ',' << c.shear_z_n << ',' << ch.commanded.normal_n << ','
-          << ch.commanded.shear_x_n << ',' << ch.commanded.shear_z_n << ',' << ch.measured.normal_n << ','
-          << tracked_below << ',' << proxy_below << '\n';
+      csv << t << ',' << contact_force << ',' << snap->contact_normal_n[kIndex] << ',' << c.normal_n << ','
+          << c.shear_x_n << ',' << c.shear_z_n << ',' << pad.normal_n << ',' << pad.shear_x_n << ',' << pad.shear_z_n
+          << ',' << ch.commanded.normal_n << ',' << ch.commanded.shear_x_n << ',' << ch.commanded.shear_z_n << ','
+          << ch.measured.normal_n << ',' << tracked_below << ',' << proxy_below << '\n';
     }
   }
   servo.disengage_and_zero(t0 + static_cast<TimeNs>(steps) * kNsPerMillisecond);
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  if (csv && !csv.flush()) return report_error(make_error(Errc::io_error, "writing " + a.csv + " failed"));
 
+  const DeviceLimits& limits = model->limits();
   if (!a.plot.empty()) {
     std::vector<PlotPanel> panels = {
-        {"Index fingertip force", "N", {contact_n, contact_s, cmd_n, meas_n}},
+        {"Index fingertip force", "N", {contact_f, tip_n, pad_n, cmd_f, meas_n}},
         {"Index fingertip depth inside the surface (the proxy stays on it)", "mm", {tracked_depth, proxy_depth}},
     };
     if (auto s = write_svg_plot(a.plot, "proprio haptics sim: " + a.scene + ", " + std::string(model->kind()), "time (s)",
@@ -183,21 +213,41 @@ int run_sim(const SimArgs& a) {
     j["scene"] = a.scene;
     j["device"] = model->kind();
     j["seconds"] = a.seconds;
-    j["peak_contact_normal_n"] = peak;
-    j["max_tracked_depth_m"] = max_tracked_depth;
-    j["max_proxy_depth_m"] = max_proxy_depth;
+    j["peak_contact_force_n"] = peak.contact_force;
+    j["peak_contact_normal_sum_n"] = peak.contact_normal_sum;
+    j["peak_pad_normal_n"] = peak.pad_normal;
+    j["peak_pad_shear_n"] = peak.pad_shear;
+    j["peak_commanded_force_n"] = peak.commanded_force;
+    j["peak_commanded_normal_n"] = peak.commanded_normal;
+    j["peak_commanded_shear_n"] = peak.commanded_shear;
+    j["peak_device_normal_n"] = peak.device_normal;
+    j["device_max_normal_n"] = limits.max_normal_n;
+    j["device_max_shear_n"] = limits.max_shear_n;
+    j["max_tracked_depth_m"] = peak.tracked_depth;
+    j["max_proxy_depth_m"] = peak.proxy_depth;
     j["instability_resets"] = stats.instability_resets;
     j["wall_s"] = wall_s;
     std::printf("%s\n", j.dump(2).c_str());
   } else {
     std::printf(
         "%.1f s simulated in %.2f s wall (%.1fx real time)\n"
-        "Index fingertip: peak contact normal force %.2f N; the tracked fingertip went %.1f mm into the surface, "
-        "the proxy %.1f mm (contact softness)\n"
+        "Index fingertip, all contacts on its distal phalanx:\n"
+        "  peak contact force %.2f N (magnitude of the net force; %.2f N summed along the contact normals)\n"
+        "  felt on the pad (sent to the device before its limits): peak %.2f N pressure, %.2f N shear\n"
+        "  peak commanded force %.2f N (%.2f N normal, %.2f N shear) after the safety gate; device limits %.2f N "
+        "normal, %.2f N shear\n"
+        "  device sensors: peak normal %.2f N\n"
+        "  the tracked fingertip went %.1f mm into the surface, the proxy %.1f mm (contact softness)\n"
         "Device: %s\n",
-        a.seconds, wall_s, a.seconds / std::max(wall_s, 1e-9), peak, max_tracked_depth * 1e3, max_proxy_depth * 1e3,
-        sink->describe().c_str());
+        a.seconds, wall_s, a.seconds / std::max(wall_s, 1e-9), peak.contact_force, peak.contact_normal_sum,
+        peak.pad_normal, peak.pad_shear, peak.commanded_force, peak.commanded_normal, peak.commanded_shear,
+        limits.max_normal_n, limits.max_shear_n, peak.device_normal, peak.tracked_depth * 1e3,
+        peak.proxy_depth * 1e3, sink->describe().c_str());
     if (!a.plot.empty()) std::printf("Plot: %s\n", a.plot.c_str());
+  }
+  if (stats.instability_resets != 0) {
+    std::fprintf(stderr, "error: MuJoCo went unstable %llu times; the forces above include the resets\n",
+                 static_cast<unsigned long long>(stats.instability_resets));
   }
   return stats.instability_resets == 0 ? 0 : 1;
 }

@@ -116,6 +116,12 @@ struct FingertipContact {
   // (fingertip_force.hpp). Zero when nothing touches it.
   FingertipForce force;
   FingertipForce raw;  // unfiltered, this step
+  // Filtered, the same contacts as the pad feels them (felt_on_pad(), summed
+  // over the distal phalanx's contacts): what the servo loop sends to a
+  // fingertip device. A press on the tip's end or side shows here as pad
+  // pressure; `force` reads it as shear or a negative normal. Its normal_n is
+  // contact_normal_n, and friction is its only shear.
+  FingertipForce on_pad;
   Vec3 f_in_world = Vec3::Zero();  // unfiltered total force, world frame
   // Filtered, how hard the surfaces press together: the sum of the contacts'
   // normal forces along their contact normals. The fingertip frame's

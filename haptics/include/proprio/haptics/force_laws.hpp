@@ -34,6 +34,10 @@ struct AnalyticContact {
   Vec3 n_in_world = Vec3::Zero();  // surface normal at the contact, out of the object
   Vec3 f_in_world = Vec3::Zero();  // force on the fingertip
   FingertipForce force;             // the same in the fingertip frame
+  // As the pad feels it (felt_on_pad(): the law has no friction, so all of
+  // it is pad pressure, whichever part of the fingertip touches): what to
+  // send a fingertip device.
+  FingertipForce on_pad;
 };
 
 // A plane through p_plane_in_world with outward normal n_in_world (unit).

@@ -2,7 +2,8 @@
 // The 1 kHz haptic servo loop. Each tick it:
 //   1. takes the newest tracked hand from a mailbox (any thread submits it),
 //   2. steps the contact simulation (proxy hand under virtual coupling),
-//   3. reads each fingertip's contact force,
+//   3. reads each fingertip's contact force, as its pad feels it
+//      (FingertipContact::on_pad: a press on the tip's end is pad pressure),
 //   4. passes it through that device's safety gate (clamp, rate limit,
 //      ramp-in, watchdog, NaN -> zero),
 //   5. maps it to motor angles with the device model, and
@@ -87,6 +88,7 @@ struct ServoSnapshot {
   std::uint64_t tick = 0;
   HandPose proxy;  // the rendered hand
   std::array<FingertipForce, kFingerCount> contact{};  // the simulation's (filtered) fingertip forces
+  std::array<FingertipForce, kFingerCount> on_pad{};   // FingertipContact::on_pad: what the devices are sent (before scale and gate)
   std::array<double, kFingerCount> contact_normal_n{};  // FingertipContact::contact_normal_n
   std::array<double, kFingerCount> object_normal_n{};   // FingertipContact::object_normal_n
   struct Channel {

@@ -11,10 +11,12 @@ namespace proprio::haptics {
 struct TouchScriptOptions {
   Vec3 p_surface_in_world = Vec3(0.0, 1.0, -0.55);  // where the index tip first lands
   double approach_height_m = 0.06;
-  // How far below the surface the tracked fingertip goes. The coupling's
-  // stiffness turns this into force: with the default gains, 3 mm gives about
-  // 0.3 N, 1 cm about 0.8 N and 1.5 cm about 1.4 N (the proxy itself stays
-  // within a millimetre of the surface).
+  // How far below the surface the tracked fingertip goes; the proxy itself
+  // stays within a millimetre of the surface. The pitched finger meets it
+  // with the end of its tip first and, nearly straight, acts as a strut for
+  // the wrist coupling: at 1 cm the contact force peaks near 16 N along the
+  // finger (the coupling's leash caps it) before the slide brings the pad
+  // round, at about 1 N.
   double press_depth_m = 0.01;
   double slide_m = 0.08;         // along +x while pressed
   double period_s = 4.0;         // approach 1 s, press 0.5 s, slide 1.5 s, lift 1 s

@@ -162,20 +162,8 @@ Status visit(const tinygltf::Model& model, int node_index, const glm::mat4& pare
 }  // namespace
 
 Result<MeshData> load_gltf(const std::filesystem::path& file) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(file, ec)) {
-    return make_error(Errc::not_found, fmt::format("glTF file '{}' does not exist", file.string()));
-  }
-  tinygltf::TinyGLTF loader;
   tinygltf::Model model;
-  std::string err, warn;
-  const bool binary = file.extension() == ".glb";
-  const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, file.string())
-                         : loader.LoadASCIIFromFile(&model, &err, &warn, file.string());
-  if (!ok) {
-    return make_error(Errc::parse_error, fmt::format("glTF file '{}' could not be read: {}", file.string(),
-                                                     err.empty() ? warn : err));
-  }
+  if (auto s = detail::read_gltf_file(model, file); !s) return s.error();
   MeshData mesh;
   mesh.name = file.stem().string();
   const std::string name = file.string();

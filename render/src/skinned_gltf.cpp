@@ -278,21 +278,9 @@ void skin_vertices(std::span<const SkinnedVertex> vertices, std::span<const glm:
 }
 
 Result<SkinnedMeshData> load_skinned_gltf(const std::filesystem::path& file) {
-  std::error_code ec;
   const std::string name = file.string();
-  if (!std::filesystem::is_regular_file(file, ec)) {
-    return make_error(Errc::not_found, fmt::format("glTF file '{}' does not exist", name));
-  }
-  tinygltf::TinyGLTF loader;
   tinygltf::Model model;
-  std::string err, warn;
-  const bool binary = file.extension() == ".glb";
-  const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, name)
-                         : loader.LoadASCIIFromFile(&model, &err, &warn, name);
-  if (!ok) {
-    return make_error(Errc::parse_error, fmt::format("glTF file '{}' could not be read: {}", name,
-                                                     err.empty() ? warn : err));
-  }
+  if (auto s = detail::read_gltf_file(model, file); !s) return s.error();
   const tinygltf::Node* skinned = nullptr;
   for (const auto& node : model.nodes) {
     if (node.mesh >= 0 && node.skin >= 0) {

@@ -279,3 +279,12 @@ def _(t):
     t.run("xr-probe", "--seconds", "1", env=_app_env(t, t.path("replay.toml")), timeout=30).expect(err=r"FIFO")
     vist = t.write("vist.toml", f'[[source]]\ntype = "vist"\npath = "{rec}"\n')
     t.run("xr-probe", "--seconds", "1", env=_app_env(t, vist), timeout=30).expect(err=r"FIFO")
+
+
+@case("23.5 a glTF hand or a stereo calibration that is a FIFO is refused, no hang")
+def _(t):
+    fifo = t.fifo("hand.gltf")
+    t.run("run", "half-cylinder", "--headless", "--frames", "1", "--hand-look", fifo, "--out", "f",
+          timeout=60).fails_cleanly(r"FIFO")
+    cal = t.fifo("stereo.yaml")
+    t.run("track", "vist", "--live", "--calibration", cal, "--seconds", "1", timeout=60).expect(rc=1, err=r"FIFO")

@@ -20,6 +20,7 @@
 #include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/core/recording.hpp"
+#include "proprio/core/replay_source.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 #include "xr_loader_paths.hpp"
 
@@ -134,11 +135,18 @@ std::string config_origin() {
   return "under HOME";
 }
 
-// Why a replay/vist source's recording cannot be served, or "" when it can.
-std::string recording_problem(const std::string& path) {
-  auto reader = RecordingReader::open(path);
+// Why a replay/vist source's recording cannot be served ("" when it can), and
+// in `warning` what the layer will warn about when it serves a damaged one.
+std::string recording_problem(const openxr_layer::SourceConfig& s, std::string& warning) {
+  if (s.type == openxr_layer::SourceType::replay) {
+    auto check = check_replay_file(s.path);
+    if (!check) return check.error().message;
+    if (check->damaged) warning = check->problem;
+    return {};
+  }
+  auto reader = RecordingReader::open(s.path);
   if (!reader) return reader.error().message;
-  if (reader->streams().empty()) return "the recording '" + printable(path) + "' has no streams";
+  if (reader->streams().empty()) return "the recording '" + printable(s.path) + "' has no streams";
   return {};
 }
 
@@ -167,7 +175,9 @@ bool report_layer_config(bool describe) {
     const auto& s = cfg->sources[i];
     if (s.type != openxr_layer::SourceType::replay && s.type != openxr_layer::SourceType::vist) continue;
     // What the layer will open inside the app: the same checks, now.
-    const std::string problem = recording_problem(s.path);
+    std::string warning;
+    const std::string problem = recording_problem(s, warning);
+    if (!warning.empty()) std::printf("  Warning: [[source]] #%zu: %s\n", i + 1, warning.c_str());
     if (!problem.empty()) {
       std::printf("  Problem: [[source]] #%zu (%s) cannot serve hands: %s\n", i + 1,
                   std::string(openxr_layer::to_string(s.type)).c_str(), problem.c_str());

@@ -13,6 +13,8 @@
 #include <system_error>
 #include <utility>
 
+#include "proprio/core/file_io.hpp"
+
 namespace proprio::vist {
 
 namespace {
@@ -672,6 +674,7 @@ constexpr int kFormatVersion = 1;
 }  // namespace
 
 Status StereoCalibration::save(const std::filesystem::path& path) const {
+  if (auto s = check_output_path(path, "stereo calibration"); !s) return s;
   try {
     cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
     if (!fs.isOpened()) {
@@ -723,14 +726,16 @@ Status StereoCalibration::save(const std::filesystem::path& path) const {
 }
 
 Result<StereoCalibration> StereoCalibration::load(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return make_error(Errc::not_found, "calibration '" + path.string() +
-                                           "' does not exist; make one with 'proprio calibrate stereo'");
+  // Read here (a regular file, bounded) and parse from memory: OpenCV's own
+  // open would block for ever on a FIFO.
+  auto text = read_input_file(path, "stereo calibration", 16 * kMiB);
+  if (!text) {
+    if (text.error().code != Errc::not_found) return text.error();
+    return make_error(Errc::not_found, text.error().message + "; make one with 'proprio calibrate stereo'");
   }
   const std::string where = "calibration '" + path.string() + "'";
   try {
-    cv::FileStorage fs(path.string(), cv::FileStorage::READ);
+    cv::FileStorage fs(*text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
     if (!fs.isOpened()) return make_error(Errc::io_error, "cannot open " + where + " for reading");
     if (fs["format"].empty() || static_cast<std::string>(fs["format"]) != kFormatName) {
       return make_error(Errc::parse_error, where + " is not a proprio stereo calibration (no 'format: " +

@@ -142,6 +142,13 @@ void note_input_file(const std::filesystem::path& path) {
   if (::stat(path.c_str(), &st) == 0) remember(st);
 }
 
+void forget_input_file(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return;
+  std::lock_guard lock(registry().mutex);
+  registry().files.erase({st.st_dev, st.st_ino});
+}
+
 Status check_output_path(const std::filesystem::path& path, std::string_view what) {
   const std::string w(what);
   if (path.empty()) return make_error(Errc::invalid_argument, "no " + w + " path given (the path is empty)");
@@ -151,7 +158,9 @@ Status check_output_path(const std::filesystem::path& path, std::string_view wha
     return make_error(Errc::invalid_argument, "refusing to write the " + w + " to " + quoted(path) +
                                                   ": that file is an input of this command; choose another path");
   }
-  if (!S_ISREG(st.st_mode)) {
+  // Streams may go to /dev/null or a FIFO a reader holds open; a folder or a
+  // socket is a mistake.
+  if (S_ISDIR(st.st_mode) || S_ISSOCK(st.st_mode)) {
     return make_error(Errc::invalid_argument,
                       "cannot write the " + w + " to " + quoted(path) + ": it is " + kind_of(st.st_mode));
   }
@@ -163,6 +172,11 @@ Status write_file_atomic(const std::filesystem::path& path, std::string_view con
   const std::string w(what);
   if (auto s = check_output_path(path, what); !s) return s;
   struct stat st {};
+  // The rename would replace the node itself: never a device or a FIFO.
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    return make_error(Errc::invalid_argument,
+                      "cannot write the " + w + " to " + quoted(path) + ": it is " + kind_of(st.st_mode));
+  }
   if (!overwrite && ::lstat(path.c_str(), &st) == 0) {
     return make_error(Errc::invalid_argument, w + " " + quoted(path) + " already exists; pass --force to replace it");
   }

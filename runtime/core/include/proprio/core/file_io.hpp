@@ -61,13 +61,19 @@ Result<std::string> read_input_file(const std::filesystem::path& path, std::stri
 // for readers that open files another way (OpenCV, hidapi).
 void note_input_file(const std::filesystem::path& path);
 
-// Refuses an output path that names a file this process reads, or that is not
-// a regular file where one exists (a directory, FIFO or device).
+// For a file this process owns and updates in place (a study session's
+// sidecar, read on resume and rewritten after each trial): it stops counting
+// as an input, so write_file_atomic may replace it.
+void forget_input_file(const std::filesystem::path& path);
+
+// Refuses an output path that names a file this process reads, a directory or
+// a socket. Streams may go to a device (/dev/null) or a FIFO.
 Status check_output_path(const std::filesystem::path& path, std::string_view what);
 
 // Writes `contents` to `path` atomically: a temporary file in the same folder,
 // fsync, rename over `path`, fsync of the folder. Refuses what
-// check_output_path refuses; with overwrite = false, also an existing file.
+// check_output_path refuses and any existing target that is not a regular
+// file; with overwrite = false, also an existing file.
 Status write_file_atomic(const std::filesystem::path& path, std::string_view contents, std::string_view what,
                          bool overwrite = true);
 

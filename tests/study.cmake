@@ -4,6 +4,7 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::study)
   proprio_add_test(study_tests
     SOURCES
       unit/test_study_psychometric.cpp
+      unit/test_study_bootstrap.cpp
       unit/test_study_statistics.cpp
       unit/test_study_csv_plot.cpp
       unit/test_study_design.cpp
@@ -52,4 +53,11 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::study AND TARGET proprio)
     FIXTURES_SETUP study_demo)
   set_tests_properties(study_cli.analyze PROPERTIES LABELS integration FIXTURES_REQUIRED study_demo
     PASS_REGULAR_EXPRESSION "repeated-measures ANOVA")
+endif()
+
+# The CSV reader's fuzz target (tests/fuzz/fuzz_csv_reader.cpp, seeds in
+# tests/fuzz/corpus/csv_reader/), built by the loop in tests/CMakeLists.txt.
+if(TARGET proprio::study)
+  list(APPEND PROPRIO_FUZZ_TARGETS csv_reader)
+  set(PROPRIO_FUZZ_DEPS_csv_reader proprio::study)
 endif()

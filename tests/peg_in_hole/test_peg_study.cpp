@@ -8,6 +8,9 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
 #include <filesystem>
 #include <set>
 #include <thread>
@@ -83,6 +86,74 @@ TEST(PegStudy, ASigkilledStudyResumesWithNoTrialLostOrRepeated) {
   for (const auto& row : t->rows) seen.insert(row[trial]);
   EXPECT_EQ(seen.size(), 20u) << "every trial exactly once";
   EXPECT_TRUE(fs::exists(dir / "recordings" / "sim01_trial20.prec"));
+  fs::remove_all(dir);
+}
+
+// The session's files without what legitimately differs between runs: the
+// CSV's wall-clock column and the sidecar's timestamps and resumes.
+std::string csv_without_time(const fs::path& p) {
+  auto t = study::read_csv(p);
+  EXPECT_TRUE(t) << (t ? "" : t.error().message);
+  std::string out;
+  if (!t) return out;
+  for (auto row : t->rows) {
+    row.pop_back();  // recorded_unix_ns
+    for (const auto& f : row) out += f + ",";
+    out += "\n";
+  }
+  return out;
+}
+nlohmann::json sidecar_without_time(const fs::path& p) {
+  std::ifstream in(p);
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  EXPECT_TRUE(j.is_object()) << p;
+  if (!j.is_object()) return j;
+  j.erase("started_unix_ns");
+  j.erase("resumes");
+  return j;
+}
+std::string file_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// Issue 23.2: a resumed simulated participant started untrained (its
+// familiarisation ran only without trials on disk), so the GG-corrected p
+// changed from 0.005 to 0.07. It now relives its familiarisation and the
+// recorded trials and continues exactly as an uninterrupted run.
+TEST(PegStudy, AResumedStudyReproducesTheUninterruptedRunExactly) {
+  PegInHoleConfig c;  // as tests/peg_in_hole/quick.toml: short phases, short trials
+  c.familiarisation.spring_phase_s = 1;
+  c.familiarisation.ground_phase_s = 1;
+  c.main_task.trial_timeout_s = 1.5;
+  c.recording.rate_hz = 10;
+  SimulatedStudyOptions o;
+  o.participants = 1;
+  o.seed = 4;
+  o.threads = 1;
+  const fs::path ref_dir = fresh_dir("peg_exact_ref"), dir = fresh_dir("peg_exact");
+  o.out_dir = ref_dir;
+  auto ref = run_simulated_study(c, o);
+  ASSERT_TRUE(ref) << ref.error().message;
+  o.out_dir = dir;
+  o.stop_after_trials = 4;
+  auto stopped = run_simulated_study(c, o);
+  ASSERT_TRUE(stopped) << stopped.error().message;
+  ASSERT_EQ(stopped->trials_run, 4);
+  o.stop_after_trials = -1;
+  o.resume = true;
+  auto resumed = run_simulated_study(c, o);
+  ASSERT_TRUE(resumed) << resumed.error().message;
+  EXPECT_EQ(resumed->trials_recovered, 4);
+  EXPECT_EQ(resumed->trials_run, 16);
+  const std::string name = "peg-in-hole_sim01_s1";
+  EXPECT_EQ(csv_without_time(ref_dir / (name + ".csv")), csv_without_time(dir / (name + ".csv")));
+  EXPECT_EQ(sidecar_without_time(ref_dir / (name + ".json")), sidecar_without_time(dir / (name + ".json")));
+  for (const int trial : {1, 4, 5, 20}) {
+    const std::string rec = fmt::format("recordings/sim01_trial{:02d}.prec", trial);
+    EXPECT_EQ(file_bytes(ref_dir / rec), file_bytes(dir / rec)) << rec;
+  }
+  fs::remove_all(ref_dir);
   fs::remove_all(dir);
 }
 

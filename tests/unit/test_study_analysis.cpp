@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "proprio/core/file_io.hpp"
+#include "proprio/core/random.hpp"
 #include "proprio/study/analysis.hpp"
 #include "proprio/study/session.hpp"
 #include "study/simulated_observer.hpp"
@@ -129,6 +131,160 @@ TEST(StudyAnalysis, ExplainsAnEmptyOrMissingFolder) {
   auto empty = analyze_study(dir, {});
   ASSERT_FALSE(empty);
   EXPECT_NE(empty.error().message.find("no trials"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+// Sessions whose answers follow a fixed rule: everyone correct from 7.5 cm
+// up (100 % there, in both conditions), alternating below.
+fs::path rule_study(const std::string& name, int participants) {
+  auto d = StudyDesign::parse(kDesign);
+  EXPECT_TRUE(d) << d.error().message;
+  const fs::path dir = fs::temp_directory_path() / ("proprio_study_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  for (int p = 0; p < participants; ++p) {
+    SessionOptions o;
+    o.out_dir = dir;
+    o.participant = "P" + std::to_string(p + 1);
+    o.participant_index = p;
+    o.sync_each_trial = false;
+    auto s = Session::open(*d, o);
+    EXPECT_TRUE(s) << s.error().message;
+    while (s && !s->finished()) {
+      auto t = s->next_trial();
+      Response r;
+      r.correct = t->stimulus >= 7.5 || (t->index + p) % 3 != 0;
+      EXPECT_TRUE(s->record(*t, r));
+    }
+  }
+  return dir;
+}
+
+std::vector<std::string> lines_of(const fs::path& p) {
+  std::ifstream in(p);
+  std::vector<std::string> out;
+  for (std::string l; std::getline(in, l);) out.push_back(l);
+  return out;
+}
+
+void write_lines(const fs::path& p, const std::vector<std::string>& lines) {
+  std::ofstream out(p, std::ios::trunc);
+  for (const std::string& l : lines) out << l << "\n";
+}
+
+StudyAnalysisOptions quick() {
+  StudyAnalysisOptions o;
+  o.bootstrap = 0;
+  return o;
+}
+
+// Issue 23.8: duplicated rows, missing trials and a session split across
+// files were analysed without a word.
+TEST(StudyAnalysis, RefusesADuplicatedTrialNamingBothPlaces) {
+  const fs::path dir = rule_study("dup", 2);
+  const fs::path csv = dir / "analysis-test_P1_s1.csv";
+  auto lines = lines_of(csv);
+  lines.push_back(lines[5]);  // the row of trial 4 again, as a second writer left it
+  write_lines(csv, lines);
+  auto a = analyze_study(dir, quick());
+  ASSERT_FALSE(a);
+  const std::string& m = a.error().message;
+  EXPECT_NE(m.find("analysis-test_P1_s1.csv:" + std::to_string(lines.size())), std::string::npos) << m;
+  EXPECT_NE(m.find("already at"), std::string::npos) << m;
+  EXPECT_NE(m.find("analysis-test_P1_s1.csv:6"), std::string::npos) << m;
+  fs::remove_all(dir);
+}
+
+TEST(StudyAnalysis, RefusesMissingTrialsUnlessAllowedAndThenSaysWhich) {
+  const fs::path dir = rule_study("missing", 2);
+  const fs::path csv = dir / "analysis-test_P2_s1.csv";
+  auto lines = lines_of(csv);
+  lines.erase(lines.begin() + 11, lines.begin() + 14);  // trials 10, 11 and 12
+  write_lines(csv, lines);
+  auto a = analyze_study(dir, quick());
+  ASSERT_FALSE(a);
+  EXPECT_NE(a.error().message.find("3 of 360 planned trials are missing (trial 10-12)"), std::string::npos)
+      << a.error().message;
+  EXPECT_NE(a.error().message.find("--allow-incomplete"), std::string::npos);
+  auto o = quick();
+  o.allow_incomplete = true;
+  auto allowed = analyze_study(dir, o);
+  ASSERT_TRUE(allowed) << allowed.error().message;
+  bool noted = false;
+  for (const std::string& n : allowed->notes) noted |= n.find("trial 10-12") != std::string::npos;
+  EXPECT_TRUE(noted);
+  fs::remove_all(dir);
+}
+
+TEST(StudyAnalysis, RefusesOneSessionSplitAcrossTwoFiles) {
+  const fs::path dir = rule_study("split", 2);
+  const fs::path csv = dir / "analysis-test_P1_s1.csv";
+  auto lines = lines_of(csv);
+  std::vector<std::string> second = {lines[0]};
+  second.insert(second.end(), lines.begin() + 200, lines.end());
+  lines.resize(200);
+  write_lines(csv, lines);
+  write_lines(dir / "analysis-test_P1_s1_part2.csv", second);
+  fs::copy_file(dir / "analysis-test_P1_s1.json", dir / "analysis-test_P1_s1_part2.json");
+  auto a = analyze_study(dir, quick());
+  ASSERT_FALSE(a);
+  EXPECT_NE(a.error().message.find("split across two files"), std::string::npos) << a.error().message;
+  fs::remove_all(dir);
+}
+
+TEST(StudyAnalysis, RefusesOutOfRangeSettings) {
+  const fs::path dir = rule_study("ranges", 2);
+  for (auto set : std::vector<void (*)(StudyAnalysisOptions&)>{
+           [](StudyAnalysisOptions& o) { o.guess = 1.0; }, [](StudyAnalysisOptions& o) { o.guess = -0.1; },
+           [](StudyAnalysisOptions& o) { o.lapse = 1.5; }, [](StudyAnalysisOptions& o) { o.lapse_max = -1; },
+           [](StudyAnalysisOptions& o) { o.threshold = 0.0; }, [](StudyAnalysisOptions& o) { o.threshold = 1.0; },
+           [](StudyAnalysisOptions& o) { o.threshold = 0.4; },  // below the 2AFC guess rate
+           [](StudyAnalysisOptions& o) {
+             o.guess = 0.6;
+             o.lapse = 0.5;
+           }}) {
+    auto o = quick();
+    set(o);
+    auto a = analyze_study(dir, o);
+    EXPECT_FALSE(a) << "an out-of-range setting gave an (empty) analysis";
+    if (!a) {
+      EXPECT_EQ(a.error().code, Errc::invalid_argument) << a.error().message;
+    }
+  }
+  EXPECT_TRUE(analyze_study(dir, quick()));
+  fs::remove_all(dir);
+}
+
+// Issue 23.9: a level where everyone scores 100 % came out "maximally
+// significant"; it is not testable.
+TEST(StudyAnalysis, LevelsWithoutVarianceAreNotTestable) {
+  const fs::path dir = rule_study("ceiling", 3);
+  auto a = analyze_study(dir, quick());
+  ASSERT_TRUE(a) << a.error().message;
+  int ceiling_levels = 0;
+  for (const LevelAnova& l : a->level_anovas) {
+    if (l.level < 7.5) continue;
+    ++ceiling_levels;
+    ASSERT_TRUE(l.one_way);
+    EXPECT_FALSE(l.one_way->testable) << l.level;
+    EXPECT_TRUE(std::isnan(l.one_way->p)) << l.level;
+    if (l.repeated) {
+      EXPECT_FALSE(l.repeated->testable) << l.level;
+    }
+  }
+  EXPECT_EQ(ceiling_levels, 2);
+  const std::string j = study_analysis_json(*a);
+  EXPECT_NE(j.find("\"testable\": false"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+TEST(StudyAnalysis, RefusesAFolderAStudyIsWritingIn) {
+  const fs::path dir = rule_study("busy", 2);
+  auto other = FolderLock::acquire(dir, "study folder");  // as a running study in another process
+  ASSERT_TRUE(other);
+  auto a = analyze_study(dir, quick());
+  ASSERT_FALSE(a);
+  EXPECT_EQ(a.error().code, Errc::unavailable);
+  EXPECT_NE(a.error().message.find("a study is running"), std::string::npos) << a.error().message;
   fs::remove_all(dir);
 }
 

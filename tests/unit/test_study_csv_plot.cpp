@@ -1,7 +1,12 @@
 // CSV reading (quoting, errors with line numbers) and the SVG plot.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 
 #include "proprio/study/csv.hpp"
 #include "proprio/study/plot.hpp"
@@ -38,6 +43,34 @@ TEST(Csv, ErrorsNameTheFileLineAndColumn) {
   EXPECT_NE(missing.error().message.find("level, n"), std::string::npos);
   EXPECT_FALSE(parse_csv("", "e.csv"));
   EXPECT_FALSE(parse_csv("a,b\n\"open,1\n", "q.csv"));
+}
+
+// Issue 23.6: a spreadsheet's UTF-8 byte-order mark became part of the first
+// column's name, so "subject" was no longer recognised as the id column.
+TEST(Csv, StripsAUtf8ByteOrderMark) {
+  auto t = parse_csv("\xEF\xBB\xBFsubject,a\n1,2\n", "bom.csv");
+  ASSERT_TRUE(t) << t.error().message;
+  EXPECT_EQ(t->header[0], "subject");
+  EXPECT_TRUE(t->column("subject"));
+}
+
+// Issue 23.5: `psychometric fit --data /dev/zero` aborted and a FIFO hung.
+TEST(Csv, RefusesSpecialFilesWithAMessage) {
+  auto zero = read_csv("/dev/zero");
+  ASSERT_FALSE(zero);
+  EXPECT_NE(zero.error().message.find("/dev/zero"), std::string::npos) << zero.error().message;
+  const std::filesystem::path fifo =
+      std::filesystem::temp_directory_path() / ("proprio_csv_fifo_" + std::to_string(::getpid()));
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto f = read_csv(fifo);  // no writer: a blocking open would hang here
+  EXPECT_FALSE(f);
+  std::filesystem::remove(fifo);
+  auto dir = read_csv(std::filesystem::temp_directory_path());
+  EXPECT_FALSE(dir);
+  auto missing = read_csv("/nonexistent/x.csv");
+  ASSERT_FALSE(missing);
+  EXPECT_EQ(missing.error().code, Errc::not_found);
 }
 
 TEST(PsychometricSvg, DrawsPointsSizedByTrialsAndTheThreshold) {

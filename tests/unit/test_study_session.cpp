@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 
+#include "proprio/core/file_io.hpp"
 #include "proprio/study/csv.hpp"
 #include "proprio/study/session.hpp"
 #include "study/simulated_observer.hpp"
@@ -332,6 +333,105 @@ TEST(Session, RejectsBadOptions) {
   ASSERT_FALSE(s);
   EXPECT_NE(s.error().message.find("JSON object"), std::string::npos);
   fs::remove_all(o.out_dir);
+}
+
+// Issue 23.1: two runs on one folder interleaved and duplicated trials. The
+// folder is locked before anything in it is touched; a second holder (another
+// process: a separate flock, as FolderLock takes it) is refused and the files
+// stay as they are.
+TEST(SessionLock, ASecondProcessOnTheFolderIsRefusedAndTouchesNothing) {
+  auto d = StudyDesign::parse(kConstant);
+  ASSERT_TRUE(d) << d.error().message;
+  const fs::path dir = fresh_dir("lock");
+  SimulatedObserver obs;
+  {
+    auto first = Session::open(*d, options_for(dir));
+    ASSERT_TRUE(first) << first.error().message;
+    ASSERT_TRUE(run_trials(*first, obs, 3));
+  }
+  const auto before = rows_without_time(dir / "crash-test_P01_s1.csv");
+  ASSERT_EQ(before.size(), 3u);
+  {
+    auto other = FolderLock::acquire(dir, "study folder");  // what another process holds
+    ASSERT_TRUE(other) << other.error().message;
+    auto second = Session::open(*d, options_for(dir));
+    ASSERT_FALSE(second) << "a second writer on a locked folder";
+    EXPECT_EQ(second.error().code, Errc::unavailable);
+    EXPECT_NE(second.error().message.find("in use by another process"), std::string::npos) << second.error().message;
+    EXPECT_NE(second.error().message.find("pid " + std::to_string(::getpid())), std::string::npos)
+        << second.error().message;
+    auto another_participant = Session::open(*d, [&] {
+      auto o = options_for(dir);
+      o.participant = "P02";
+      return o;
+    }());
+    EXPECT_FALSE(another_participant);
+    EXPECT_FALSE(fs::exists(dir / "crash-test_P02_s1.csv"));
+    EXPECT_FALSE(check_study_folder_not_in_use(dir)) << "an analysis must not read a study being written";
+  }
+  EXPECT_EQ(rows_without_time(dir / "crash-test_P01_s1.csv"), before);
+  EXPECT_TRUE(check_study_folder_not_in_use(dir));
+  // Released with the other holder: the session resumes.
+  auto again = Session::open(*d, options_for(dir));
+  ASSERT_TRUE(again) << again.error().message;
+  EXPECT_EQ(again->recovered_trials(), 3);
+  fs::remove_all(dir);
+}
+
+TEST(SessionLock, OneProcessMayRunParticipantsInParallelButNotOneSessionTwice) {
+  auto d = StudyDesign::parse(kConstant);
+  ASSERT_TRUE(d) << d.error().message;
+  const fs::path dir = fresh_dir("lock_same");
+  auto a = Session::open(*d, options_for(dir));
+  ASSERT_TRUE(a) << a.error().message;
+  auto twice = Session::open(*d, options_for(dir));
+  ASSERT_FALSE(twice) << "two Session objects appending to one CSV";
+  EXPECT_NE(twice.error().message.find("already open"), std::string::npos) << twice.error().message;
+  auto o2 = options_for(dir);
+  o2.participant = "P02";
+  auto b = Session::open(*d, o2);
+  EXPECT_TRUE(b) << b.error().message;
+  EXPECT_TRUE(check_study_folder_not_in_use(dir)) << "this process's own lock does not block its analysis";
+  // The lock is held while any session of this process lives, and no longer.
+  a = Result<Session>(make_error(Errc::invalid_argument, "closed"));
+  EXPECT_FALSE(FolderLock::acquire(dir, "study folder"));
+  b = Result<Session>(make_error(Errc::invalid_argument, "closed"));
+  EXPECT_TRUE(FolderLock::acquire(dir, "study folder"));
+  fs::remove_all(dir);
+}
+
+TEST(SessionLock, ResumeListsTheRecordedTrialsWithTheirResponses) {
+  auto d = StudyDesign::parse(kConstant);
+  ASSERT_TRUE(d) << d.error().message;
+  const fs::path dir = fresh_dir("recovered_list");
+  std::vector<Trial> seen;
+  {
+    auto s = Session::open(*d, options_for(dir));
+    ASSERT_TRUE(s) << s.error().message;
+    for (int n = 0; n < 4; ++n) {
+      auto t = s->next_trial();
+      ASSERT_TRUE(t);
+      Response r;
+      r.correct = n % 2 == 0;
+      r.response_time_s = 0.25 * n;
+      r.extra["note"] = "n" + std::to_string(n);
+      ASSERT_TRUE(s->record(*t, r));
+      seen.push_back(*t);
+    }
+  }
+  auto s = Session::open(*d, options_for(dir));
+  ASSERT_TRUE(s) << s.error().message;
+  const auto& list = s->recovered_trial_list();
+  ASSERT_EQ(list.size(), 4u);
+  for (int n = 0; n < 4; ++n) {
+    EXPECT_EQ(list[n].trial.index, seen[n].index);
+    EXPECT_EQ(list[n].trial.stimulus, seen[n].stimulus);
+    EXPECT_EQ(list[n].trial.levels, seen[n].levels);
+    EXPECT_EQ(list[n].response.correct, n % 2 == 0);
+    EXPECT_EQ(list[n].response.response_time_s, 0.25 * n);
+    EXPECT_EQ(list[n].response.extra.at("note"), "n" + std::to_string(n));
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -128,5 +128,57 @@ TEST(Statistics, RejectsBadInput) {
   EXPECT_FALSE(parse_p_adjust("sidak"));
 }
 
+// Issue 23.9: data without variance gave F = inf, p = 0, partial eta^2 = 1.
+TEST(Statistics, DegenerateDataAreNotTestable) {
+  auto flat = repeated_measures_anova({{1, 1, 1}, {1, 1, 1}, {1, 1, 1}});
+  ASSERT_TRUE(flat) << flat.error().message;
+  EXPECT_FALSE(flat->testable);
+  EXPECT_FALSE(flat->not_testable_reason.empty());
+  EXPECT_TRUE(std::isnan(flat->f));
+  EXPECT_TRUE(std::isnan(flat->p));
+  EXPECT_TRUE(std::isnan(flat->gg_p));
+  EXPECT_TRUE(std::isnan(flat->partial_eta_squared));
+  // Everyone at 100 % in one level, the same offsets elsewhere: no error variance.
+  auto ceiling = repeated_measures_anova({{1.0, 0.5}, {1.0, 0.5}, {1.0, 0.5}, {1.0, 0.5}});
+  ASSERT_TRUE(ceiling);
+  EXPECT_FALSE(ceiling->testable);
+  EXPECT_TRUE(std::isnan(ceiling->p));
+  // Additive data (subject offset + condition effect, nothing else).
+  auto additive = repeated_measures_anova({{0.1, 0.3, 0.7}, {1.1, 1.3, 1.7}, {2.1, 2.3, 2.7}});
+  ASSERT_TRUE(additive);
+  EXPECT_FALSE(additive->testable) << "round-off error variance is not variance: F " << additive->f;
+  auto ow = one_way_anova({{0.1, 0.1}, {0.3, 0.3}});
+  ASSERT_TRUE(ow);
+  EXPECT_FALSE(ow->testable);
+  EXPECT_TRUE(std::isnan(ow->f));
+  auto pt = paired_t_test({0.3, 0.5, 0.9}, {0.1, 0.3, 0.7});  // every difference 0.2 (in round-off)
+  ASSERT_TRUE(pt);
+  EXPECT_FALSE(pt->testable);
+  EXPECT_TRUE(std::isnan(pt->p));
+  EXPECT_TRUE(std::isnan(pt->t));
+  // A not-testable comparison is no comparison for the corrections.
+  const std::vector<double> ps = {0.01, std::nan(""), 0.04};
+  EXPECT_NEAR(bonferroni(ps)[0], 0.02, 1e-15);
+  EXPECT_TRUE(std::isnan(bonferroni(ps)[1]));
+  EXPECT_NEAR(holm(ps)[2], 0.04, 1e-15);
+  EXPECT_TRUE(std::isnan(holm(ps)[1]));
+}
+
+TEST(Statistics, RoundOffSumsOfSquaresAreNoEffect) {
+  // A Latin square: the conditions' means are equal, but computed with
+  // round-off (0.1 + 0.2 != 0.3): their sum of squares is exactly 0, F = 0, p = 1.
+  auto a = repeated_measures_anova({{0.1 + 0.2, 0.4, 0.2}, {0.4, 0.2, 0.3}, {0.2, 0.3, 0.4}});
+  ASSERT_TRUE(a) << a.error().message;
+  ASSERT_TRUE(a->testable) << a->not_testable_reason;
+  EXPECT_EQ(a->ss_conditions, 0.0);
+  EXPECT_EQ(a->f, 0.0);
+  EXPECT_EQ(a->p, 1.0);
+  // Real data stay testable and unchanged (the hand-worked case's F).
+  auto real = repeated_measures_anova({{10, 12, 15}, {8, 11, 11}, {9, 9, 14}, {11, 15, 16}, {7, 10, 12}});
+  ASSERT_TRUE(real);
+  EXPECT_TRUE(real->testable);
+  EXPECT_GT(real->f, 1.0);
+}
+
 }  // namespace
 }  // namespace proprio::study

@@ -14,6 +14,7 @@
 #include "proprio/peg_in_hole/live.hpp"
 #include "proprio/peg_in_hole/study_runner.hpp"
 #include "proprio/study/completion_time.hpp"
+#include "proprio/study/session.hpp"
 #include "run_args.hpp"
 
 namespace proprio::cli {
@@ -35,6 +36,10 @@ int analyse_and_print(const fs::path& dir) {
 }
 
 int run_simulated(const RunArgs& a, const PegInHoleConfig& config, const fs::path& out) {
+  // For the whole command, the report included: a second run on the same
+  // --out fails here, before it deletes (--force) or appends anything.
+  auto folder_lock = study::StudyFolderLock::acquire(out);
+  if (!folder_lock) return report_error(folder_lock.error());
   SimulatedStudyOptions o;
   o.out_dir = out;
   o.participants = a.participants;

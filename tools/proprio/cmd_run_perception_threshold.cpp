@@ -16,6 +16,7 @@
 #include "proprio/perception_threshold/live.hpp"
 #include "proprio/perception_threshold/report.hpp"
 #include "proprio/perception_threshold/simulation.hpp"
+#include "proprio/study/session.hpp"
 #include "run_args.hpp"
 
 namespace proprio::cli {
@@ -49,6 +50,10 @@ int analyse_and_print(const fs::path& dir) {
 
 int run_simulated(const RunArgs& a, const PerceptionProtocol& protocol, const study::StudyDesign& design,
                   const fs::path& out) {
+  // For the whole command, the report included: a second run on the same
+  // --out fails here, before it deletes (--force) or appends anything.
+  auto folder_lock = study::StudyFolderLock::acquire(out);
+  if (!folder_lock) return report_error(folder_lock.error());
   SimulatedStudyOptions o;
   o.out_dir = out;
   o.participants = a.participants;

@@ -9,9 +9,11 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/study/csv.hpp"
 #include "proprio/study/plot.hpp"
+#include "proprio/study/session.hpp"
 
 namespace proprio::study {
 namespace {
@@ -33,8 +35,9 @@ struct SidecarInfo {
 };
 
 Result<SidecarInfo> read_sidecar(const fs::path& path) {
-  std::ifstream in(path);
-  json j = json::parse(in, nullptr, false);
+  auto text = read_input_file(path, "session sidecar");
+  if (!text) return text.error();
+  json j = json::parse(*text, nullptr, false);
   if (j.is_discarded() || !j.is_object()) {
     return make_error(Errc::parse_error, fmt::format("{} is not valid JSON; restore it from a backup or delete it "
                                                      "and pass --stimulus/--response/--conditions",
@@ -145,7 +148,8 @@ json rm_json(const RepeatedMeasuresAnova& a) {
           {"gg_epsilon", a.gg_epsilon},    {"gg_df_conditions", a.gg_df_conditions},
           {"gg_df_error", a.gg_df_error},  {"gg_p", number_or_null(a.gg_p)},
           {"ss_conditions", a.ss_conditions}, {"ss_error", a.ss_error},
-          {"partial_eta_squared", number_or_null(a.partial_eta_squared)}};
+          {"partial_eta_squared", number_or_null(a.partial_eta_squared)},
+          {"testable", a.testable},        {"not_testable_reason", a.not_testable_reason}};
 }
 
 std::string safe_file_name(const std::string& s) {
@@ -169,12 +173,130 @@ Result<std::vector<StimulusLevel>> levels_from_trials(const std::vector<double>&
   return pool_levels(out);
 }
 
+namespace {
+
+// "3, 5, 7-119": trial numbers, runs collapsed.
+std::string ranges_text(const std::vector<long long>& v) {
+  std::string out;
+  for (std::size_t i = 0; i < v.size();) {
+    std::size_t j = i;
+    while (j + 1 < v.size() && v[j + 1] == v[j] + 1) ++j;
+    out += (out.empty() ? "" : ", ") + (j == i ? std::to_string(v[i]) : fmt::format("{}-{}", v[i], v[j]));
+    i = j + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+Status SessionFileChecker::add(const CsvTable& table, const fs::path& sidecar) {
+  const auto pc = table.column("participant"), sc = table.column("session"), tc = table.column("trial");
+  if (!tc) return Status::success();  // not a session file: nothing to check against
+  std::set<std::string> sessions_here;
+  Expected e;
+  e.file = table.source;
+  for (std::size_t r = 0; r < table.rows.size(); ++r) {
+    const std::string participant = pc ? table.rows[r][*pc] : fs::path(table.source).stem().string();
+    const std::string session = sc ? table.rows[r][*sc] : "1";
+    auto trial = table.integer(r, *tc);
+    if (!trial) return trial.error();
+    const std::string where = fmt::format("{}:{}", table.source, table.lines[r]);
+    const std::string key = participant + '\x1f' + session + '\x1f' + std::to_string(*trial);
+    if (const auto [it, fresh] = trial_at_.emplace(key, where); !fresh) {
+      return make_error(Errc::invalid_argument,
+                        fmt::format("{}: trial {} of participant {} (session {}) is already at {}: a trial recorded "
+                                    "twice (two runs on one folder, or a copied file) would be counted twice; remove "
+                                    "the duplicate rows or file",
+                                    where, *trial, printable(participant, 40), printable(session, 10), it->second));
+    }
+    const std::string skey = participant + '\x1f' + session;
+    if (sessions_here.insert(skey).second) {
+      if (const auto [it, fresh] = session_in_.emplace(skey, table.source); !fresh) {
+        return make_error(Errc::invalid_argument,
+                          fmt::format("{}: participant {} (session {}) is also in {}: one session split across two "
+                                      "files; keep one file per session",
+                                      where, printable(participant, 40), printable(session, 10), it->second));
+      }
+    }
+    e.present.insert(*trial);
+  }
+  if (sidecar.empty()) return Status::success();
+  auto text = read_input_file(sidecar, "session sidecar");
+  if (!text) return text.error();
+  const json j = json::parse(*text, nullptr, false);
+  if (!j.is_object()) return make_error(Errc::parse_error, fmt::format("{} is not valid JSON", sidecar.string()));
+  try {
+    const long long planned = j.value("planned_trials", 0LL);
+    e.status = j.value("status", std::string());
+    // Adaptive procedures may stop before their last slot: once the sidecar
+    // says "complete", their plan is the trials it says were completed.
+    const bool constant = j.value("procedure", std::string()) == "constant";
+    e.trials = constant || e.status != "complete" ? planned : j.value("completed_trials", 0LL);
+  } catch (const json::exception& ex) {
+    return make_error(Errc::parse_error, fmt::format("{}: malformed field: {}", sidecar.string(), ex.what()));
+  }
+  expected_.push_back(std::move(e));
+  return Status::success();
+}
+
+Status SessionFileChecker::finish(std::vector<std::string>& notes) const {
+  for (const Expected& e : expected_) {
+    std::vector<long long> missing;
+    for (long long t = 0; t < e.trials; ++t) {
+      if (!e.present.count(t)) missing.push_back(t);
+    }
+    const bool unfinished = e.status != "complete";
+    if (missing.empty() && !unfinished) continue;
+    const std::string what =
+        missing.empty()
+            ? fmt::format("{}: its sidecar says the session is not finished (status '{}')", e.file,
+                          printable(e.status, 20))
+            : fmt::format("{}: {} of {} planned trials are missing (trial {}){}", e.file, missing.size(), e.trials,
+                          ranges_text(missing), unfinished ? "; the session is not finished" : "");
+    if (!allow_incomplete_) {
+      return make_error(Errc::invalid_argument,
+                        what + "; run the session again to complete it, or pass --allow-incomplete to analyse the "
+                               "trials that are there");
+    }
+    notes.push_back(what + " (analysed anyway: --allow-incomplete)");
+  }
+  return Status::success();
+}
+
 Result<StudyAnalysis> analyze_study(const fs::path& dir, const StudyAnalysisOptions& options) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) {
     return make_error(Errc::not_found, fmt::format("{} is not a folder; pass the folder holding the session CSVs",
                                                    dir.string()));
   }
+  if (Status s = check_study_folder_not_in_use(dir); !s) return s.error();
+  // Refused before any fit: a value out of range would fail every fit and
+  // leave an empty report behind.
+  const auto in = [](const std::optional<double>& v, double lo, double hi) { return !v || (*v >= lo && *v < hi); };
+  if (!in(options.guess, 0.0, 1.0)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("--guess {} is outside [0, 1): 0.5 for 2AFC, 1/m for m-AFC, 0 for yes/no",
+                                  *options.guess));
+  }
+  if (!in(options.lapse, 0.0, 1.0) || !in(options.lapse_max, 0.0, 1.0)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("--{} {} is outside [0, 1): lapse rates are small proportions, e.g. 0.02 or 0.06",
+                                  options.lapse ? "lapse" : "lapse-max",
+                                  options.lapse ? *options.lapse : *options.lapse_max));
+  }
+  if (!in(options.threshold, 0.0, 1.0) || (options.threshold && *options.threshold <= 0.0)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("--threshold {} is outside (0, 1): it is the proportion correct that defines the "
+                                  "threshold, e.g. 0.75",
+                                  *options.threshold));
+  }
+  if (options.bootstrap < 0) {
+    return make_error(Errc::invalid_argument, "--bootstrap must be 0 (no intervals) or more samples");
+  }
+  if (!(options.coverage > 0.0 && options.coverage < 1.0)) {
+    return make_error(Errc::invalid_argument, fmt::format("coverage {} must lie in (0, 1)", options.coverage));
+  }
+  SessionFileChecker checker(options.allow_incomplete);
   std::vector<fs::path> csvs;
   for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
        it.increment(ec)) {
@@ -219,6 +341,7 @@ Result<StudyAnalysis> analyze_study(const fs::path& dir, const StudyAnalysisOpti
     }
     auto table = read_csv(csv);
     if (!table) return table.error();
+    if (Status s = checker.add(*table, info ? sidecar : fs::path()); !s) return s.error();
     auto sc = table->require_column(stim_col);
     if (!sc) return sc.error();
     auto rc = table->require_column(resp_col);
@@ -248,6 +371,7 @@ Result<StudyAnalysis> analyze_study(const fs::path& dir, const StudyAnalysisOpti
       t.correct.push_back(static_cast<int>(*y));
     }
   }
+  if (Status s = checker.finish(a.notes); !s) return s.error();
   if (trials.empty()) {
     return make_error(Errc::not_found,
                       fmt::format("no trials found under {}: expected session CSVs with their .json sidecars, as "
@@ -284,6 +408,19 @@ Result<StudyAnalysis> analyze_study(const fs::path& dir, const StudyAnalysisOpti
     fo.lapse_max = *options.lapse_max;
   }
   if (options.threshold) criterion = *options.threshold;
+  const double top = 1.0 - (fo.lapse_free ? fo.lapse_max : fo.lapse);
+  if (!(fo.guess >= 0.0 && fo.guess < top && top <= 1.0)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("guess rate {} and lapse {} leave no range for the function (guess must be below "
+                                  "1 - lapse); check --guess/--lapse/--lapse-max or the sidecar's analysis section",
+                                  fo.guess, 1.0 - top));
+  }
+  if (!(criterion > fo.guess && criterion < top)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("threshold proportion {} is never reached by a function that runs from the guess "
+                                  "rate {} to 1 - lapse = {}; choose --threshold between them (e.g. 0.75 for 2AFC)",
+                                  criterion, fo.guess, top));
+  }
   a.fit_options = fo;
   a.criterion = criterion;
   a.method = options.method;
@@ -472,10 +609,12 @@ std::string study_analysis_json(const StudyAnalysis& a) {
                                 {"mean_difference", c.test.mean_difference},
                                 {"t", number_or_null(c.test.t)},
                                 {"df", c.test.df},
-                                {"p", c.test.p},
-                                {"p_holm", c.p_holm},
-                                {"p_bonferroni", c.p_bonferroni},
-                                {"cohen_dz", number_or_null(c.test.cohen_dz)}});
+                                {"p", number_or_null(c.test.p)},
+                                {"p_holm", number_or_null(c.p_holm)},
+                                {"p_bonferroni", number_or_null(c.p_bonferroni)},
+                                {"cohen_dz", number_or_null(c.test.cohen_dz)},
+                                {"testable", c.test.testable},
+                                {"not_testable_reason", c.test.not_testable_reason}});
   }
   j["level_anovas"] = json::array();
   for (const LevelAnova& l : a.level_anovas) {
@@ -484,7 +623,9 @@ std::string study_analysis_json(const StudyAnalysis& a) {
       e["one_way"] = {{"f", number_or_null(l.one_way->f)},
                       {"df_between", l.one_way->df_between},
                       {"df_within", l.one_way->df_within},
-                      {"p", number_or_null(l.one_way->p)}};
+                      {"p", number_or_null(l.one_way->p)},
+                      {"testable", l.one_way->testable},
+                      {"not_testable_reason", l.one_way->not_testable_reason}};
     }
     if (l.repeated) e["repeated_measures"] = rm_json(*l.repeated);
     j["level_anovas"].push_back(e);

@@ -9,14 +9,18 @@
 #include <set>
 #include <sstream>
 
+#include "proprio/core/file_io.hpp"
+#include "proprio/study/analysis.hpp"
+#include "proprio/study/session.hpp"
+
 namespace proprio::study {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 Result<std::string> sidecar_kind(const fs::path& sidecar_json) {
-  std::ifstream in(sidecar_json);
-  if (!in) return make_error(Errc::not_found, fmt::format("cannot open {}", sidecar_json.string()));
-  const json j = json::parse(in, nullptr, false);
+  auto text = read_input_file(sidecar_json, "session sidecar");
+  if (!text) return text.error();
+  const json j = json::parse(*text, nullptr, false);
   if (j.is_discarded() || !j.is_object() || j.value("format", "") != "proprio-study-session") {
     return make_error(Errc::parse_error, fmt::format("{} is not a proprio study sidecar", sidecar_json.string()));
   }
@@ -193,6 +197,7 @@ Result<CompletionTimeAnalysis> analyze_completion_time_study(const fs::path& dir
     return make_error(Errc::not_found, fmt::format("{} is not a folder; pass the folder holding the session CSVs",
                                                    dir.string()));
   }
+  if (Status s = check_study_folder_not_in_use(dir); !s) return s.error();
   std::vector<fs::path> csvs;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     if (!e.is_regular_file() || e.path().extension() != ".csv") continue;
@@ -210,12 +215,20 @@ Result<CompletionTimeAnalysis> analyze_completion_time_study(const fs::path& dir
                                                    dir.string()));
   }
   std::vector<CsvTable> tables;
+  SessionFileChecker checker(o.allow_incomplete);
+  std::vector<std::string> notes;
   for (const fs::path& p : csvs) {
     auto t = read_csv(p);
     if (!t) return t.error();
+    fs::path sidecar = p;
+    sidecar.replace_extension(".json");
+    if (Status s = checker.add(*t, sidecar); !s) return s.error();
     tables.push_back(std::move(*t));
   }
-  return analyze_completion_times(tables, o);
+  if (Status s = checker.finish(notes); !s) return s.error();
+  auto a = analyze_completion_times(tables, o);
+  if (a) a->notes.insert(a->notes.end(), notes.begin(), notes.end());
+  return a;
 }
 
 namespace {
@@ -226,7 +239,8 @@ json anova_json(const RepeatedMeasuresAnova& r) {
   return {{"subjects", r.subjects},       {"conditions", r.conditions}, {"f", r.f},
           {"df_conditions", r.df_conditions}, {"df_error", r.df_error},   {"p", r.p},
           {"gg_epsilon", r.gg_epsilon},   {"gg_df_conditions", r.gg_df_conditions},
-          {"gg_df_error", r.gg_df_error}, {"gg_p", r.gg_p},             {"partial_eta_squared", r.partial_eta_squared}};
+          {"gg_df_error", r.gg_df_error}, {"gg_p", r.gg_p},             {"partial_eta_squared", r.partial_eta_squared},
+          {"testable", r.testable},       {"not_testable_reason", r.not_testable_reason}};
 }
 
 }  // namespace
@@ -258,8 +272,10 @@ std::string completion_time_json(const CompletionTimeAnalysis& a) {
   for (const auto& c : a.pairwise) {
     pw.push_back({{"a", c.a}, {"b", c.b}, {"n", c.test.n}, {"mean_difference", c.test.mean_difference},
                   {"t", c.test.t}, {"df", c.test.df}, {"p", c.test.p}, {"p_bonferroni", c.p_bonferroni},
-                  {"p_holm", c.p_holm}, {"cohen_dz", c.test.cohen_dz}});
+                  {"p_holm", c.p_holm}, {"cohen_dz", c.test.cohen_dz}, {"testable", c.test.testable},
+                  {"not_testable_reason", c.test.not_testable_reason}});
   }
+  j["notes"] = a.notes;
   j["pairwise"] = pw;
   return j.dump(2);
 }
@@ -274,6 +290,10 @@ std::string completion_time_text(const CompletionTimeAnalysis& a) {
   }
   const auto anova_line = [&](const char* what, const RepeatedMeasuresAnova& r) {
     if (r.subjects < 2) return;
+    if (!r.testable) {
+      s << fmt::format("\nRM-ANOVA ({}, {} subjects): not testable: {}\n", what, r.subjects, r.not_testable_reason);
+      return;
+    }
     s << fmt::format("\nRM-ANOVA ({}, {} subjects): F({:.0f}, {:.0f}) = {:.3f}, p = {}; Greenhouse-Geisser epsilon = "
                      "{:.3f}: F({:.3f}, {:.3f}), p = {}; partial eta^2 = {:.3f}\n",
                      what, r.subjects, r.df_conditions, r.df_error, r.f, fmt_p(r.p), r.gg_epsilon, r.gg_df_conditions,
@@ -286,9 +306,15 @@ std::string completion_time_text(const CompletionTimeAnalysis& a) {
   s << fmt::format("{:<8} {:>5} {:>12} {:>9} {:>12} {:>12} {:>12}\n", "pair", "n", "mean diff", "t", "p",
                    "Bonferroni", "Holm");
   for (const auto& c : a.pairwise) {
+    if (!c.test.testable) {
+      s << fmt::format("{:<8} {:>5} {:>12.4f}  not testable: {}\n", c.a + "-" + c.b, c.test.n, c.test.mean_difference,
+                       c.test.not_testable_reason);
+      continue;
+    }
     s << fmt::format("{:<8} {:>5} {:>12.4f} {:>9.3f} {:>12} {:>12} {:>12}\n", c.a + "-" + c.b, c.test.n,
                      c.test.mean_difference, c.test.t, fmt_p(c.test.p), fmt_p(c.p_bonferroni), fmt_p(c.p_holm));
   }
+  for (const std::string& n : a.notes) s << "\nnote: " << n << "\n";
   return s.str();
 }
 

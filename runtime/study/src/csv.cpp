@@ -4,8 +4,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <fmt/format.h>
-#include <fstream>
-#include <sstream>
+
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::study {
 
@@ -20,8 +20,8 @@ Result<std::size_t> CsvTable::require_column(std::string_view name) const {
   if (auto c = column(name)) return *c;
   std::string have;
   for (const std::string& h : header) have += (have.empty() ? "" : ", ") + h;
-  return make_error(Errc::not_found,
-                    fmt::format("{}: no column '{}' in the header (columns: {})", source, name, have));
+  return make_error(Errc::not_found, fmt::format("{}: no column '{}' in the header (columns: {})", source,
+                                                 printable(name, 60), printable(have, 300)));
 }
 
 Result<double> CsvTable::number(std::size_t row, std::size_t col) const {
@@ -34,7 +34,7 @@ Result<double> CsvTable::number(std::size_t row, std::size_t col) const {
   if (!parsed || !std::isfinite(v)) {
     return make_error(Errc::parse_error,
                       fmt::format("{}:{}: column '{}' holds '{}', which is not a finite number", source, lines[row],
-                                  header[col], text));
+                                  printable(header[col], 60), printable(text, 60)));
   }
   return v;
 }
@@ -45,7 +45,7 @@ Result<long long> CsvTable::integer(std::size_t row, std::size_t col) const {
   if (*v != std::floor(*v) || std::abs(*v) > 9e15) {
     return make_error(Errc::parse_error,
                       fmt::format("{}:{}: column '{}' holds '{}', which is not a whole number", source, lines[row],
-                                  header[col], rows[row][col]));
+                                  printable(header[col], 60), printable(rows[row][col], 60)));
   }
   return static_cast<long long>(*v);
 }
@@ -53,7 +53,9 @@ Result<long long> CsvTable::integer(std::size_t row, std::size_t col) const {
 Result<CsvTable> parse_csv(std::string_view text, std::string source_name) {
   CsvTable table;
   table.source = std::move(source_name);
-  std::size_t i = 0;
+  // Spreadsheet programs save "UTF-8 CSV" with a byte-order mark, which
+  // would otherwise become part of the first column's name.
+  std::size_t i = text.substr(0, 3) == "\xEF\xBB\xBF" ? 3 : 0;
   int line = 1;
   bool have_header = false;
   while (i < text.size()) {
@@ -131,13 +133,9 @@ Result<CsvTable> parse_csv(std::string_view text, std::string source_name) {
 }
 
 Result<CsvTable> read_csv(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return make_error(Errc::not_found, fmt::format("cannot open {}: check the path", path.string()));
-  }
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  return parse_csv(buffer.str(), path.string());
+  auto text = read_input_file(path, "CSV file");
+  if (!text) return text.error();
+  return parse_csv(*text, printable(path.string()));
 }
 
 std::string csv_field(std::string_view text) {

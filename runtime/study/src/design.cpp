@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/random.hpp"
 
 namespace proprio::study {
@@ -191,15 +192,9 @@ int ProcedureDesign::max_trials_per_cell() const {
 }
 
 Result<StudyDesign> StudyDesign::load_file(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return make_error(Errc::not_found,
-                      fmt::format("cannot open the study design {}: check the path (examples in config/studies/)",
-                                  path.string()));
-  }
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  auto text = read_input_file(path, "study design (examples in config/studies/)");
+  if (!text) return text.error();
+  return parse(*text, path.string());
 }
 
 Result<StudyDesign> StudyDesign::parse(const std::string& toml_text, const std::string& source_name) {

@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <boost/math/distributions/normal.hpp>
 #include <cmath>
 #include <fmt/format.h>
 #include <limits>
 #include <map>
+#include <utility>
+#include <thread>
 
 #include "nelder_mead.hpp"
 #include "proprio/core/random.hpp"
@@ -25,36 +28,6 @@ double standard_normal_quantile(double p) {
 
 // k log k/(n p) terms with 0 log 0 = 0.
 double xlogy_ratio(double k, double expected) { return k > 0.0 ? k * std::log(k / expected) : 0.0; }
-
-// The search works in unconstrained coordinates: log(alpha) for the Weibull
-// (alpha > 0), log(beta) always (beta > 0), and lambda = max (1 + sin u) / 2
-// when the lapse is free, so every simplex point is a valid function.
-struct Parameterisation {
-  FitOptions options;
-  double log_beta_min = 0.0, log_beta_max = 0.0;  // search box for log(beta)
-  double u_alpha_min = 0.0, u_alpha_max = 0.0;    // search box for alpha's coordinate
-
-  std::size_t dimensions() const { return options.lapse_free ? 3 : 2; }
-
-  PsychometricParams to_params(const std::vector<double>& u) const {
-    PsychometricParams p;
-    p.alpha = options.model == PsychometricModel::weibull ? std::exp(u[0]) : u[0];
-    p.beta = std::exp(u[1]);
-    p.gamma = options.guess;
-    p.lambda = options.lapse_free ? options.lapse_max * 0.5 * (1.0 + std::sin(u[2])) : options.lapse;
-    return p;
-  }
-  std::vector<double> to_search(const PsychometricParams& p) const {
-    std::vector<double> u(dimensions());
-    u[0] = options.model == PsychometricModel::weibull ? std::log(p.alpha) : p.alpha;
-    u[1] = std::log(p.beta);
-    if (options.lapse_free) {
-      const double s = options.lapse_max > 0.0 ? std::clamp(2.0 * p.lambda / options.lapse_max - 1.0, -1.0, 1.0) : 0.0;
-      u[2] = std::asin(s);
-    }
-    return u;
-  }
-};
 
 Status validate_options(const FitOptions& o) {
   if (!(o.guess >= 0.0 && o.guess < 1.0)) {
@@ -82,57 +55,472 @@ std::vector<StimulusLevel> used_levels(const std::vector<StimulusLevel>& data) {
   return out;
 }
 
-Result<PsychometricFit> polish(const std::vector<StimulusLevel>& data, const Parameterisation& param,
-                               const PsychometricParams& start, int evaluations_so_far) {
-  const PsychometricModel model = param.options.model;
-  auto objective = [&](const std::vector<double>& u) {
-    if (u[1] < param.log_beta_min || u[1] > param.log_beta_max) return kInf;
-    if (u[0] < param.u_alpha_min || u[0] > param.u_alpha_max) return kInf;
-    return -log_likelihood(model, param.to_params(u), data);
-  };
-  detail::NelderMeadOptions nm;
-  // A start outside the search box (a caller's guess) is moved inside it.
-  std::vector<double> u0 = param.to_search(start);
-  u0[0] = std::clamp(u0[0], param.u_alpha_min, param.u_alpha_max);
-  u0[1] = std::clamp(u0[1], param.log_beta_min, param.log_beta_max);
-  const detail::NelderMeadResult r = detail::nelder_mead(objective, u0, nm);
-  if (!std::isfinite(r.f)) {
-    return make_error(Errc::invalid_argument, "the likelihood is not finite anywhere the search looked; check the data");
+
+// ---------------------------------------------------------------------------
+// The likelihood in search coordinates.
+//
+// Every model is F(z) with z = beta (s - a): for the Weibull s = ln x and
+// a = ln alpha (then F(z) = 1 - exp(-e^z)), for the others s = x and a = alpha.
+// The search runs over theta = (a, ln beta[, lambda]) inside a box, with
+// analytic first and second derivatives, so a bounded Newton method converges
+// in a handful of steps; the box only stops separable data (and their
+// bootstrap replicas) from running off to infinity, where the threshold means
+// nothing anyway.
+
+using Theta = std::array<double, 3>;
+using Matrix = std::array<double, 9>;  // row-major 3 x 3
+constexpr double kTiny = 1e-300;       // probabilities are clamped here before the log
+
+// F(z), 1 - F(z) (without cancellation: a steep fit's upper levels need it),
+// F'(z) and F''(z).
+struct SigmoidValues {
+  double f = 0.0, fc = 1.0, d1 = 0.0, d2 = 0.0;
+};
+
+SigmoidValues sigmoid_z(PsychometricModel model, double z) {
+  SigmoidValues v;
+  switch (model) {
+    case PsychometricModel::weibull:
+    case PsychometricModel::gumbel: {
+      const double scale = model == PsychometricModel::weibull ? 1.0 : kLn10;
+      const double lz = scale * z;
+      // Far out the values are exact to double precision; returning them
+      // directly also keeps exp() off its slow overflow and underflow paths.
+      if (lz > 6.55) {  // e^lz > 700
+        v.f = 1.0;
+        v.fc = 0.0;
+        break;
+      }
+      if (lz < -700.0) break;
+      const double t = std::exp(lz);
+      v.f = -std::expm1(-t);
+      v.fc = std::exp(-t);
+      v.d1 = scale * std::exp(lz - t);
+      v.d2 = v.d1 == 0.0 ? 0.0 : scale * v.d1 * (1.0 - t);
+      break;
+    }
+    case PsychometricModel::logistic: {
+      const double e = std::abs(z) > 700.0 ? 0.0 : std::exp(-std::abs(z));
+      const double big = 1.0 / (1.0 + e), small = e / (1.0 + e);
+      v.f = z >= 0.0 ? big : small;
+      v.fc = z >= 0.0 ? small : big;
+      v.d1 = v.f * v.fc;
+      v.d2 = v.d1 * (v.fc - v.f);
+      break;
+    }
+    case PsychometricModel::cumulative_normal: {
+      v.f = 0.5 * std::erfc(-z / std::sqrt(2.0));
+      v.fc = 0.5 * std::erfc(z / std::sqrt(2.0));
+      v.d1 = std::abs(z) > 38.0 ? 0.0 : std::exp(-0.5 * z * z) / std::sqrt(2.0 * M_PI);
+      v.d2 = -z * v.d1;
+      break;
+    }
   }
-  PsychometricFit fit;
-  fit.model = model;
-  fit.params = param.to_params(r.x);
-  fit.log_likelihood = -r.f;
-  fit.deviance = deviance(model, fit.params, data);
-  fit.evaluations = evaluations_so_far + r.evaluations;
-  return fit;
+  return v;
 }
 
-Parameterisation make_parameterisation(const std::vector<StimulusLevel>& data, const FitOptions& options) {
-  Parameterisation param{options};
-  double lo = kInf, hi = -kInf;
-  for (const StimulusLevel& s : data) {
-    lo = std::min(lo, s.level);
-    hi = std::max(hi, s.level);
-  }
-  // beta is dimensionless for the Weibull and in 1/stimulus units otherwise.
-  // The box is generous (beta 100 times beyond the grid both ways, alpha up to
-  // 100 times the tested range away) and only stops small or separable data
-  // sets (and their bootstrap replicas) from running off to infinity, where
-  // the threshold means nothing anyway.
-  const double span = std::max(hi - lo, 1e-12);
-  if (options.model == PsychometricModel::weibull) {
-    param.log_beta_min = std::log(0.5e-2);
-    param.log_beta_max = std::log(20e2);
-    param.u_alpha_min = std::log(lo / 100.0);
-    param.u_alpha_max = std::log(hi * 100.0);
+// psi and 1 - psi at x for any parameters (the public functions' path).
+std::pair<double, double> psi_and_complement(PsychometricModel model, const PsychometricParams& p, double x) {
+  SigmoidValues v;
+  if (model == PsychometricModel::weibull) {
+    if (x > 0.0) v = sigmoid_z(model, p.beta * (std::log(x) - std::log(p.alpha)));
   } else {
-    param.log_beta_min = std::log(0.5e-2 / span);
-    param.log_beta_max = std::log(200e2 / span);
-    param.u_alpha_min = lo - 100.0 * span;
-    param.u_alpha_max = hi + 100.0 * span;
+    v = sigmoid_z(model, p.beta * (x - p.alpha));
   }
-  return param;
+  const double c = 1.0 - p.gamma - p.lambda;
+  return {p.gamma + c * v.f, p.lambda + c * v.fc};
+}
+
+struct Level {
+  double s = 0.0;  // the stimulus on the z axis
+  double k = 0.0;  // correct
+  double n = 0.0;  // trials
+};
+
+double level_log_likelihood(double k, double n, double psi, double q) {
+  double ll = 0.0;
+  if (k > 0.0) ll += k * std::log(std::max(psi, kTiny));
+  if (n > k) ll += (n - k) * std::log(std::max(q, kTiny));
+  return ll;
+}
+
+double level_deviance(double k, double n, double psi, double q) {
+  return 2.0 * (xlogy_ratio(k, n * std::max(psi, kTiny)) + xlogy_ratio(n - k, n * std::max(q, kTiny)));
+}
+
+class Likelihood {
+ public:
+  Likelihood(const std::vector<StimulusLevel>& data, const FitOptions& o) : options_(o) {
+    double lo = kInf, hi = -kInf;
+    for (const StimulusLevel& s : data) {
+      levels_.push_back({axis(s.level), static_cast<double>(s.correct), static_cast<double>(s.trials)});
+      lo = std::min(lo, s.level);
+      hi = std::max(hi, s.level);
+    }
+    level_min_ = lo;
+    level_max_ = hi;
+    // beta is dimensionless for the Weibull and in 1/stimulus units otherwise;
+    // the box reaches 100 times beyond the start grid both ways.
+    const double span = std::max(hi - lo, 1e-12);
+    steep_ = o.model == PsychometricModel::weibull ? std::log(20.0) : std::log(200.0 / span);
+    if (o.model == PsychometricModel::weibull) {
+      lo_ = {std::log(lo / 100.0), std::log(0.5e-2), 0.0};
+      hi_ = {std::log(hi * 100.0), std::log(20e2), 0.0};
+    } else {
+      lo_ = {lo - 100.0 * span, std::log(0.5e-2 / span), 0.0};
+      hi_ = {hi + 100.0 * span, std::log(200e2 / span), 0.0};
+    }
+    if (o.lapse_free) {
+      hi_[2] = o.lapse_max;
+    } else {
+      lo_[2] = hi_[2] = o.lapse;
+    }
+  }
+
+  int dimensions() const { return options_.lapse_free ? 3 : 2; }
+  const FitOptions& options() const { return options_; }
+  const Theta& lower() const { return lo_; }
+  const Theta& upper() const { return hi_; }
+  double level_min() const { return level_min_; }
+  double level_max() const { return level_max_; }
+  std::vector<Level>& levels() { return levels_; }
+  const std::vector<Level>& levels() const { return levels_; }
+  double axis(double x) const { return options_.model == PsychometricModel::weibull ? std::log(x) : x; }
+
+  PsychometricParams params(const Theta& t) const {
+    PsychometricParams p;
+    p.alpha = options_.model == PsychometricModel::weibull ? std::exp(t[0]) : t[0];
+    p.beta = std::exp(t[1]);
+    p.gamma = options_.guess;
+    p.lambda = options_.lapse_free ? t[2] : options_.lapse;
+    return p;
+  }
+  Theta theta(const PsychometricParams& p) const {
+    Theta t{axis(p.alpha), std::log(p.beta), options_.lapse_free ? p.lambda : options_.lapse};
+    return clamp(t);
+  }
+  Theta clamp(Theta t) const {
+    for (int i = 0; i < 3; ++i) t[i] = std::clamp(t[i], lo_[i], hi_[i]);
+    return t;
+  }
+  // Steeper than any start on the grid (beta 20 for the Weibull, 200 per
+  // tested range otherwise): what data that separate perfectly produce.
+  bool steep(const Theta& t) const { return t[1] > steep_; }
+
+  // psi and 1 - psi at every level.
+  template <typename Visit>
+  void each_level(const Theta& t, Visit visit) const {
+    const double beta = std::exp(t[1]);
+    const double lambda = options_.lapse_free ? t[2] : options_.lapse;
+    const double c = 1.0 - options_.guess - lambda;
+    for (const Level& l : levels_) {
+      const double z = beta * (l.s - t[0]);
+      const SigmoidValues v = sigmoid_z(options_.model, z);
+      visit(l, z, v, options_.guess + c * v.f, lambda + c * v.fc);
+    }
+  }
+
+  double log_likelihood(const Theta& t) const {
+    double ll = 0.0;
+    each_level(t, [&](const Level& l, double, const SigmoidValues&, double psi, double q) {
+      ll += level_log_likelihood(l.k, l.n, psi, q);
+    });
+    return ll;
+  }
+  double deviance(const Theta& t) const {
+    double d = 0.0;
+    each_level(t, [&](const Level& l, double, const SigmoidValues&, double psi, double q) {
+      d += level_deviance(l.k, l.n, psi, q);
+    });
+    return d;
+  }
+
+  // The gradient, the negated Hessian (observed information) and the Fisher
+  // (expected) information, over the first dimensions() coordinates.
+  void derivatives(const Theta& t, Theta& gradient, Matrix& observed, Matrix& expected) const {
+    gradient.fill(0.0);
+    observed.fill(0.0);
+    expected.fill(0.0);
+    const double beta = std::exp(t[1]);
+    const double lambda = options_.lapse_free ? t[2] : options_.lapse;
+    const double c = 1.0 - options_.guess - lambda;
+    const int d = dimensions();
+    each_level(t, [&](const Level& l, double z, const SigmoidValues& v, double psi_raw, double q_raw) {
+      const double psi = std::max(psi_raw, kTiny), q = std::max(q_raw, kTiny);
+      const double dp[3] = {-c * v.d1 * beta, c * v.d1 * z, -v.f};
+      const double d2[9] = {c * v.d2 * beta * beta, -c * beta * (v.d2 * z + v.d1), v.d1 * beta,
+                            -c * beta * (v.d2 * z + v.d1), c * (v.d2 * z * z + v.d1 * z), -v.d1 * z,
+                            v.d1 * beta, -v.d1 * z, 0.0};
+      const double wrong = l.n - l.k;
+      const double w = l.k / psi - wrong / q;
+      const double u = l.k / (psi * psi) + wrong / (q * q);
+      const double f = l.n / (psi * q);
+      for (int i = 0; i < d; ++i) {
+        gradient[i] += w * dp[i];
+        for (int j = 0; j < d; ++j) {
+          observed[3 * i + j] += u * dp[i] * dp[j] - w * d2[3 * i + j];
+          expected[3 * i + j] += f * dp[i] * dp[j];
+        }
+      }
+    });
+  }
+
+ private:
+  FitOptions options_;
+  std::vector<Level> levels_;
+  Theta lo_{}, hi_{};
+  double level_min_ = 0.0, level_max_ = 0.0;
+  double steep_ = 0.0;
+};
+
+// Solves A x = b on the coordinates in idx (m of them) by Cholesky; false when
+// A is not positive definite there.
+bool solve_positive(const Matrix& a, const Theta& b, const int* idx, int m, double* x) {
+  double l[3][3] = {};
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j <= i; ++j) {
+      double sum = a[3 * idx[i] + idx[j]];
+      for (int k = 0; k < j; ++k) sum -= l[i][k] * l[j][k];
+      if (i == j) {
+        if (!(sum > 0.0) || !std::isfinite(sum)) return false;
+        l[i][i] = std::sqrt(sum);
+      } else {
+        l[i][j] = sum / l[j][j];
+      }
+    }
+  }
+  double y[3];
+  for (int i = 0; i < m; ++i) {
+    double sum = b[idx[i]];
+    for (int k = 0; k < i; ++k) sum -= l[i][k] * y[k];
+    y[i] = sum / l[i][i];
+  }
+  for (int i = m - 1; i >= 0; --i) {
+    double sum = y[i];
+    for (int k = i + 1; k < m; ++k) sum -= l[k][i] * x[k];
+    x[i] = sum / l[i][i];
+  }
+  for (int i = 0; i < m; ++i) {
+    if (!std::isfinite(x[i])) return false;
+  }
+  return true;
+}
+
+struct Solution {
+  Theta theta{};
+  double log_likelihood = -kInf;
+  int evaluations = 0;
+};
+
+// Bounded Newton ascent: the observed information where it is positive
+// definite, else the Fisher information (always so, bar a flat direction);
+// halving the step until the likelihood rises; coordinates on a bound with the
+// gradient pointing out stay there. A simplex takes over in the rare case the
+// Newton steps run out before converging.
+Solution maximise(const Likelihood& lk, const Theta& start) {
+  Solution s;
+  s.theta = lk.clamp(start);
+  s.log_likelihood = lk.log_likelihood(s.theta);
+  s.evaluations = 1;
+  const int d = lk.dimensions();
+  bool converged = false;
+  int small_gains = 0;
+  for (int iteration = 0; iteration < 100 && !converged; ++iteration) {
+    Theta g;
+    Matrix observed, expected;
+    lk.derivatives(s.theta, g, observed, expected);
+    ++s.evaluations;
+    int idx[3];
+    int m = 0;
+    for (int i = 0; i < d; ++i) {
+      const bool held_low = s.theta[i] <= lk.lower()[i] && g[i] <= 0.0;
+      const bool held_high = s.theta[i] >= lk.upper()[i] && g[i] >= 0.0;
+      if (!held_low && !held_high) idx[m++] = i;
+    }
+    double step[3];
+    if (m == 0) break;
+    if (!solve_positive(observed, g, idx, m, step)) {
+      double largest = 0.0;
+      for (int i = 0; i < m; ++i) largest = std::max(largest, expected[4 * idx[i]]);
+      for (int i = 0; i < m; ++i) expected[4 * idx[i]] += 1e-10 * largest;
+      if (!solve_positive(expected, g, idx, m, step)) break;
+    }
+    double decrement = 0.0;
+    for (int i = 0; i < m; ++i) decrement += step[i] * g[idx[i]];
+    if (!(decrement > 0.0)) {
+      converged = true;
+      break;
+    }
+    // Close in (a predicted gain, half the decrement, below 1e-9): the Newton
+    // step lands within rounding of the maximum, and halving it in search of
+    // a rise that rounding hides would only waste evaluations.
+    if (decrement < 2e-9) {
+      Theta c = s.theta;
+      for (int i = 0; i < m; ++i) c[idx[i]] += step[i];
+      c = lk.clamp(c);
+      const double ll = lk.log_likelihood(c);
+      ++s.evaluations;
+      if (ll >= s.log_likelihood - 1e-12 * std::abs(s.log_likelihood)) {
+        s.theta = c;
+        s.log_likelihood = ll;
+      }
+      converged = true;
+      break;
+    }
+    bool moved = false;
+    double scale = 1.0;
+    for (int half = 0; half < 30; ++half, scale *= 0.5) {
+      Theta c = s.theta;
+      for (int i = 0; i < m; ++i) c[idx[i]] += scale * step[i];
+      c = lk.clamp(c);
+      const double ll = lk.log_likelihood(c);
+      ++s.evaluations;
+      if (ll > s.log_likelihood) {
+        // Gains this small twice running: where Newton converges quadratically
+        // the maximum is then reached to rounding; elsewhere it is a ridge
+        // toward infinite slope (separated data) that only creeps upward.
+        small_gains = ll - s.log_likelihood < 1e-6 ? small_gains + 1 : 0;
+        s.theta = c;
+        s.log_likelihood = ll;
+        moved = true;
+        break;
+      }
+    }
+    // No step raises the likelihood: a maximum to rounding, or a flat ridge.
+    if (!moved || small_gains >= 2) converged = true;
+  }
+  if (!converged) {
+    auto objective = [&](const std::vector<double>& u) {
+      Theta t{u[0], u[1], d == 3 ? u[2] : lk.lower()[2]};
+      for (int i = 0; i < d; ++i) {
+        if (t[i] < lk.lower()[i] || t[i] > lk.upper()[i]) return kInf;
+      }
+      return -lk.log_likelihood(t);
+    };
+    const detail::NelderMeadResult r =
+        detail::nelder_mead(objective, std::vector<double>(s.theta.begin(), s.theta.begin() + d));
+    s.evaluations += r.evaluations;
+    if (-r.f > s.log_likelihood) {
+      for (int i = 0; i < d; ++i) s.theta[i] = r.x[static_cast<std::size_t>(i)];
+      s.log_likelihood = -r.f;
+    }
+  }
+  return s;
+}
+
+// A grid of starts whose log(psi) and log(1 - psi) at every level are
+// computed once, so scoring it for a data set with the same levels (each
+// bootstrap replica, each jackknife deletion) is a dot product.
+class StartGrid {
+ public:
+  StartGrid(const Likelihood& lk, int alpha_steps, int beta_steps, const std::vector<double>& lambdas) {
+    const PsychometricModel model = lk.options().model;
+    const double lo = lk.level_min(), hi = lk.level_max();
+    const double span = hi - lo;
+    // alpha across (and a little beyond) the tested range, beta over three
+    // decades (in 1/stimulus units except for the Weibull).
+    const double beta_lo = model == PsychometricModel::weibull ? 0.5 : 0.5 / span;
+    const double beta_hi = model == PsychometricModel::weibull ? 20.0 : 200.0 / span;
+    for (double lambda : lambdas) {
+      for (int i = 0; i < alpha_steps; ++i) {
+        const double t = static_cast<double>(i) / (alpha_steps - 1);
+        const double a = model == PsychometricModel::weibull
+                             ? std::log(lo * 0.5) + t * (std::log(hi * 2.0) - std::log(lo * 0.5))
+                             : lo - 0.5 * span + t * 2.0 * span;
+        for (int j = 0; j < beta_steps; ++j) {
+          const double u = static_cast<double>(j) / (beta_steps - 1);
+          points_.push_back({a, std::log(beta_lo) + u * (std::log(beta_hi) - std::log(beta_lo)), lambda});
+        }
+      }
+    }
+    const std::size_t n = points_.size();
+    log_p_.resize(lk.levels().size() * n);
+    log_q_.resize(lk.levels().size() * n);
+    for (std::size_t p = 0; p < n; ++p) {
+      std::size_t l = 0;
+      lk.each_level(points_[p], [&](const Level&, double, const SigmoidValues&, double psi, double q) {
+        log_p_[l * n + p] = std::log(std::max(psi, kTiny));
+        log_q_[l * n + p] = std::log(std::max(q, kTiny));
+        ++l;
+      });
+    }
+  }
+
+  std::size_t size() const { return points_.size(); }
+  const Theta& point(std::size_t i) const { return points_[i]; }
+
+  // Log-likelihood of every point for the counts in `levels` (same levels as
+  // at construction) into `scores`.
+  void score(const std::vector<Level>& levels, std::vector<double>& scores) const {
+    const std::size_t n = points_.size();
+    scores.assign(n, 0.0);
+    double* out = scores.data();
+    for (std::size_t l = 0; l < levels.size(); ++l) {
+      const double k = levels[l].k, m = levels[l].n - levels[l].k;
+      const double* lp = log_p_.data() + l * n;
+      const double* lq = log_q_.data() + l * n;
+      for (std::size_t p = 0; p < n; ++p) out[p] += k * lp[p] + m * lq[p];
+    }
+  }
+
+  // The best point; among equal bests (a flat ridge) the middle one, so a
+  // ridge's estimate sits in its middle rather than at the grid's first row.
+  static std::size_t best(const std::vector<double>& scores) {
+    const double top = *std::max_element(scores.begin(), scores.end());
+    const double tie = top - 1e-9 * (1.0 + std::abs(top));
+    std::size_t count = 0;
+    for (double v : scores) count += v >= tie ? 1 : 0;
+    std::size_t wanted = count / 2;
+    for (std::size_t i = 0; i < scores.size(); ++i) {
+      if (scores[i] >= tie && wanted-- == 0) return i;
+    }
+    return 0;
+  }
+
+ private:
+  std::vector<Theta> points_;
+  std::vector<double> log_p_, log_q_;  // [level * points + point]
+};
+
+std::vector<double> grid_lambdas(const FitOptions& o, int steps) {
+  if (!o.lapse_free) return {o.lapse};
+  std::vector<double> out;
+  for (int i = 0; i < steps; ++i) out.push_back(o.lapse_max * i / (steps - 1));
+  return out;
+}
+
+// The grid used for every refit of simulated or jackknifed data: coarser than
+// the first fit's, since its best point only has to start Newton in the right
+// basin.
+StartGrid refit_grid(const Likelihood& lk) { return StartGrid(lk, 24, 16, grid_lambdas(lk.options(), 3)); }
+
+Solution refit(const Likelihood& lk, const StartGrid& grid, std::vector<double>& scores) {
+  grid.score(lk.levels(), scores);
+  Solution s = maximise(lk, grid.point(StartGrid::best(scores)));
+  s.evaluations += static_cast<int>(grid.size());
+  return s;
+}
+
+// Runs work(i, worker) for i in [0, count) on `threads` threads (0: every
+// core); `make_worker` builds each thread's scratch state. Work writes only
+// to slot i of its outputs, so results do not depend on the thread count.
+template <typename MakeWorker, typename Work>
+void parallel_for(int count, int threads, MakeWorker make_worker, Work work) {
+  int n = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  n = std::clamp(n, 1, std::max(1, count / 8));
+  std::atomic<int> next{0};
+  auto run = [&] {
+    auto worker = make_worker();
+    for (;;) {
+      const int begin = next.fetch_add(8);
+      if (begin >= count) break;
+      for (int i = begin; i < std::min(count, begin + 8); ++i) work(i, worker);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < n; ++t) pool.emplace_back(run);
+  run();
+  for (std::thread& t : pool) t.join();
 }
 
 }  // namespace
@@ -239,6 +627,12 @@ Status validate_levels(PsychometricModel model, const std::vector<StimulusLevel>
                                     "<= trials",
                                     s.level, i + 1, s.correct, s.trials));
     }
+    if (s.trials > kMaxTrials) {
+      return make_error(Errc::invalid_argument,
+                        fmt::format("at level {} (row {}): {} trials is more than the {} a level may hold; split or "
+                                    "check the data",
+                                    s.level, i + 1, s.trials, kMaxTrials));
+    }
     if (model == PsychometricModel::weibull && s.level <= 0.0 && s.trials > 0) {
       return make_error(Errc::invalid_argument,
                         fmt::format("the Weibull needs positive stimulus levels, but row {} has level {}; use the "
@@ -261,14 +655,12 @@ Status validate_levels(PsychometricModel model, const std::vector<StimulusLevel>
 }
 
 double log_likelihood(PsychometricModel model, const PsychometricParams& p, const std::vector<StimulusLevel>& data) {
-  constexpr double kEps = 1e-300;
   double ll = 0.0;
   for (const StimulusLevel& s : data) {
     if (s.trials <= 0) continue;
-    const double q = psi(model, p, s.level);
-    if (!(q >= 0.0 && q <= 1.0)) return -kInf;
-    if (s.correct > 0) ll += s.correct * std::log(std::max(q, kEps));
-    if (s.trials > s.correct) ll += (s.trials - s.correct) * std::log(std::max(1.0 - q, kEps));
+    const auto [q, r] = psi_and_complement(model, p, s.level);
+    if (!(q >= 0.0 && q <= 1.0 && r >= 0.0 && r <= 1.0)) return -kInf;
+    ll += level_log_likelihood(s.correct, s.trials, q, r);
   }
   return ll;
 }
@@ -277,94 +669,155 @@ double deviance(PsychometricModel model, const PsychometricParams& p, const std:
   double d = 0.0;
   for (const StimulusLevel& s : data) {
     if (s.trials <= 0) continue;
-    const double q = std::clamp(psi(model, p, s.level), 1e-300, 1.0 - 1e-16);
-    const double k = s.correct, n = s.trials;
-    d += xlogy_ratio(k, n * q) + xlogy_ratio(n - k, n * (1.0 - q));
+    const auto [q, r] = psi_and_complement(model, p, s.level);
+    d += level_deviance(s.correct, s.trials, q, r);
   }
-  return 2.0 * d;
+  return d;
 }
+
+namespace {
+
+PsychometricFit make_fit(const Likelihood& lk, const Solution& s, int evaluations) {
+  PsychometricFit fit;
+  fit.model = lk.options().model;
+  fit.params = lk.params(s.theta);
+  fit.log_likelihood = s.log_likelihood;
+  fit.deviance = lk.deviance(s.theta);
+  fit.evaluations = evaluations;
+  return fit;
+}
+
+}  // namespace
 
 Result<PsychometricFit> fit_psychometric(const std::vector<StimulusLevel>& raw, const FitOptions& options) {
   if (Status s = validate_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
-  const std::vector<StimulusLevel> data = used_levels(raw);
-  const Parameterisation param = make_parameterisation(data, options);
+  const Likelihood lk(used_levels(raw), options);
+  const StartGrid grid(lk, 40, 30, grid_lambdas(options, 4));
+  std::vector<double> scores;
+  grid.score(lk.levels(), scores);
 
-  double lo = kInf, hi = -kInf;
-  for (const StimulusLevel& s : data) {
-    lo = std::min(lo, s.level);
-    hi = std::max(hi, s.level);
+  // Starts: the grid's best point, and points nearly as good spread over
+  // their range of alpha (its ends, quarters and middle). Where the maximum is
+  // sharp all of them climb to it; along a flat ridge they stay apart, and
+  // that is how the fit finds out.
+  const std::size_t best_point = StartGrid::best(scores);
+  double a_low = kInf, a_high = -kInf;
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    if (scores[i] < scores[best_point] - 2.0) continue;
+    a_low = std::min(a_low, grid.point(i)[0]);
+    a_high = std::max(a_high, grid.point(i)[0]);
   }
-  // Grid: alpha across (and a little beyond) the tested range, beta over
-  // three decades, lambda at a few values; the best point starts the simplex.
-  constexpr int kAlphaSteps = 40, kBetaSteps = 30;
-  std::vector<double> alphas, betas, lambdas;
-  for (int i = 0; i < kAlphaSteps; ++i) {
-    const double t = static_cast<double>(i) / (kAlphaSteps - 1);
-    if (options.model == PsychometricModel::weibull) {
-      alphas.push_back(std::exp(std::log(lo * 0.5) + t * (std::log(hi * 2.0) - std::log(lo * 0.5))));
-    } else {
-      const double span = hi - lo;
-      alphas.push_back(lo - 0.5 * span + t * 2.0 * span);
+  std::vector<std::size_t> starts = {best_point};
+  for (double f : {0.0, 0.25, 0.5, 0.75, 1.0}) {
+    const double target = a_low + f * (a_high - a_low);
+    std::size_t pick = best_point;
+    for (std::size_t i = 0; i < grid.size(); ++i) {
+      if (scores[i] < scores[best_point] - 2.0) continue;
+      const double gap = std::abs(grid.point(i)[0] - target), best_gap = std::abs(grid.point(pick)[0] - target);
+      if (gap < best_gap || (gap == best_gap && scores[i] > scores[pick])) pick = i;
     }
+    if (std::find(starts.begin(), starts.end(), pick) == starts.end()) starts.push_back(pick);
   }
-  const double beta_lo = options.model == PsychometricModel::weibull ? 0.5 : 0.5 / (hi - lo);
-  const double beta_hi = options.model == PsychometricModel::weibull ? 20.0 : 200.0 / (hi - lo);
-  for (int i = 0; i < kBetaSteps; ++i) {
-    const double t = static_cast<double>(i) / (kBetaSteps - 1);
-    betas.push_back(std::exp(std::log(beta_lo) + t * (std::log(beta_hi) - std::log(beta_lo))));
+  std::vector<Solution> solutions;
+  int evaluations = static_cast<int>(grid.size());
+  for (std::size_t start : starts) {
+    solutions.push_back(maximise(lk, grid.point(start)));
+    evaluations += solutions.back().evaluations;
   }
-  if (options.lapse_free) {
-    lambdas = {0.0, 0.25 * options.lapse_max, 0.5 * options.lapse_max, options.lapse_max};
-  } else {
-    lambdas = {options.lapse};
+  const auto best = std::max_element(solutions.begin(), solutions.end(), [](const Solution& a, const Solution& b) {
+    return a.log_likelihood < b.log_likelihood;
+  });
+  if (!std::isfinite(best->log_likelihood)) {
+    return make_error(Errc::invalid_argument, "the likelihood is not finite anywhere the search looked; check the data");
   }
-  PsychometricParams best{alphas[0], betas[0], options.guess, lambdas[0]};
-  double best_ll = -kInf;
-  int evaluations = 0;
-  for (double lambda : lambdas) {
-    for (double alpha : alphas) {
-      for (double beta : betas) {
-        const PsychometricParams p{alpha, beta, options.guess, lambda};
-        const double ll = log_likelihood(options.model, p, data);
-        ++evaluations;
-        if (ll > best_ll) {
-          best_ll = ll;
-          best = p;
-        }
-      }
+  PsychometricFit fit = make_fit(lk, *best, evaluations);
+  for (const Solution& s : solutions) {
+    if (&s == &*best || s.log_likelihood < best->log_likelihood - kEquallyLikely) continue;
+    bool same = true;
+    for (int i = 0; i < lk.dimensions(); ++i) same = same && std::abs(s.theta[i] - best->theta[i]) <= 1e-6 * (1.0 + std::abs(best->theta[i]));
+    if (!same) fit.equally_likely.push_back(lk.params(s.theta));
+  }
+  // Separation: the steepest function the search allows, at the same place,
+  // is as likely as the best. Then any step between the two tested levels
+  // around it is too, however the search happened to stop.
+  Theta steepest = best->theta;
+  steepest[1] = lk.upper()[1];
+  if (lk.log_likelihood(steepest) >= best->log_likelihood - kEquallyLikely) {
+    const double x = fit.params.alpha;
+    double below = -kInf, above = kInf;
+    for (const StimulusLevel& s : raw) {
+      if (s.trials <= 0) continue;
+      if (s.level < x) below = std::max(below, s.level);
+      if (s.level > x) above = std::min(above, s.level);
     }
+    if (std::isfinite(below) && std::isfinite(above)) fit.step_between = std::make_pair(below, above);
   }
-  // A lapse on the boundary sits where sin() is flat; start just inside.
-  if (options.lapse_free) best.lambda = std::clamp(best.lambda, 0.05 * options.lapse_max, 0.95 * options.lapse_max);
-  return polish(data, param, best, evaluations);
+  return fit;
 }
 
 Result<PsychometricFit> fit_psychometric_from(const std::vector<StimulusLevel>& raw, const FitOptions& options,
                                               const PsychometricParams& start) {
   if (Status s = validate_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
-  const std::vector<StimulusLevel> data = used_levels(raw);
-  PsychometricParams p = start;
-  p.gamma = options.guess;
-  if (!options.lapse_free) p.lambda = options.lapse;
-  if (options.lapse_free) p.lambda = std::clamp(p.lambda, 0.05 * options.lapse_max, 0.95 * options.lapse_max);
-  return polish(data, make_parameterisation(data, options), p, 0);
+  if (!(start.beta > 0.0) || (options.model == PsychometricModel::weibull && !(start.alpha > 0.0)) ||
+      !std::isfinite(start.alpha) || !std::isfinite(start.beta)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("start alpha {} beta {} is not a valid {} function", start.alpha, start.beta,
+                                  to_string(options.model)));
+  }
+  const Likelihood lk(used_levels(raw), options);
+  const Solution s = maximise(lk, lk.theta(start));
+  if (!std::isfinite(s.log_likelihood)) {
+    return make_error(Errc::invalid_argument, "the likelihood is not finite anywhere the search looked; check the data");
+  }
+  return make_fit(lk, s, s.evaluations);
+}
+
+UniquenessCheck check_unique_maximum(const PsychometricFit& fit, const std::vector<StimulusLevel>& data,
+                                     double proportion) {
+  UniquenessCheck c;
+  const Result<double> t = threshold_at(fit.model, fit.params, proportion);
+  if (!t) return c;
+  c.threshold_min = c.threshold_max = *t;
+  if (fit.step_between) {
+    c.threshold_min = std::min(c.threshold_min, fit.step_between->first);
+    c.threshold_max = std::max(c.threshold_max, fit.step_between->second);
+  }
+  for (const PsychometricParams& p : fit.equally_likely) {
+    const Result<double> other = threshold_at(fit.model, p, proportion);
+    if (!other) continue;
+    c.threshold_min = std::min(c.threshold_min, *other);
+    c.threshold_max = std::max(c.threshold_max, *other);
+  }
+  double lo = kInf, hi = -kInf;
+  for (const StimulusLevel& s : data) {
+    if (s.trials <= 0) continue;
+    lo = std::min(lo, s.level);
+    hi = std::max(hi, s.level);
+  }
+  const double spread = c.threshold_max - c.threshold_min;
+  if (!(hi > lo) || !(spread > 0.03 * (hi - lo))) return c;
+  c.unique = false;
+  if (fit.step_between) {
+    c.message = fmt::format(
+        "the maximum likelihood is not unique: the responses separate perfectly between levels {:.4g} and {:.4g}, "
+        "so a step anywhere between them fits as well as the best, and the {} threshold can lie anywhere from "
+        "{:.4g} to {:.4g} (the estimate {:.4g} is one arbitrary point of that range); test levels between them, "
+        "or more trials, before relying on the threshold or on its confidence interval",
+        fit.step_between->first, fit.step_between->second, proportion, c.threshold_min, c.threshold_max, *t);
+    return c;
+  }
+  c.message = fmt::format(
+      "the maximum likelihood is not unique: fits as likely as the best (log-likelihood within {}) put the {} "
+      "threshold anywhere from {:.4g} to {:.4g} or further (a spread of {:.0f} % of the estimate {:.4g}); the data "
+      "do not pin the threshold down (too few trials, or responses that separate perfectly between two levels), so "
+      "test more trials near the threshold before relying on it or on its confidence interval",
+      kEquallyLikely, proportion, c.threshold_min, c.threshold_max, 100.0 * spread / std::abs(*t), *t);
+  return c;
 }
 
 namespace {
-
-std::vector<StimulusLevel> simulate(const std::vector<StimulusLevel>& data, PsychometricModel model,
-                                    const PsychometricParams& p, Rng& rng) {
-  std::vector<StimulusLevel> out = data;
-  for (StimulusLevel& s : out) {
-    const double q = psi(model, p, s.level);
-    int k = 0;
-    for (int t = 0; t < s.trials; ++t) k += rng.uniform01() < q ? 1 : 0;
-    s.correct = k;
-  }
-  return out;
-}
 
 // The statistics a bootstrap tracks, in a fixed order.
 constexpr std::size_t kStats = 5;  // alpha, beta, lambda, threshold, slope
@@ -375,27 +828,101 @@ bool statistics_of(const PsychometricFit& fit, double proportion, std::array<dou
   return true;
 }
 
+// One simulated data set, refitted.
+struct Replica {
+  bool fitted = false;
+  bool has_statistics = false;
+  bool steep = false;
+  double deviance = 0.0;
+  std::array<double, kStats> statistics{};
+};
+
+// Replica i: binomial counts from Rng(mix_seed(seed, i)) at the fit's
+// probabilities, refitted from its own grid start.
+std::vector<Replica> simulate_replicas(const Likelihood& base, const PsychometricFit& fit, int count,
+                                       std::uint64_t seed, int threads, double proportion) {
+  std::vector<double> probability;
+  base.each_level(base.theta(fit.params), [&](const Level&, double, const SigmoidValues&, double psi, double) {
+    probability.push_back(psi);
+  });
+  const StartGrid grid = refit_grid(base);
+  std::vector<Replica> out(static_cast<std::size_t>(count));
+  struct Worker {
+    Likelihood lk;
+    std::vector<double> scores;
+  };
+  parallel_for(
+      count, threads, [&] { return Worker{base, {}}; },
+      [&](int i, Worker& w) {
+        Rng rng(mix_seed(seed, static_cast<std::uint64_t>(i)));
+        std::vector<Level>& levels = w.lk.levels();
+        for (std::size_t l = 0; l < levels.size(); ++l) {
+          const auto trials = static_cast<long long>(levels[l].n);
+          long long k = 0;
+          for (long long t = 0; t < trials; ++t) k += rng.uniform01() < probability[l] ? 1 : 0;
+          levels[l].k = static_cast<double>(k);
+        }
+        const Solution s = refit(w.lk, grid, w.scores);
+        Replica& r = out[static_cast<std::size_t>(i)];
+        if (!std::isfinite(s.log_likelihood)) return;
+        r.fitted = true;
+        r.steep = w.lk.steep(s.theta);
+        r.deviance = w.lk.deviance(s.theta);
+        PsychometricFit f;
+        f.model = fit.model;
+        f.params = w.lk.params(s.theta);
+        r.has_statistics = statistics_of(f, proportion, r.statistics);
+      });
+  return out;
+}
+
+GoodnessOfFit goodness_from(const std::vector<Replica>& replicas, double observed_deviance) {
+  GoodnessOfFit g;
+  g.deviance = observed_deviance;
+  int at_least = 0;
+  for (const Replica& r : replicas) {
+    if (!r.fitted) continue;
+    ++g.simulations;
+    // A relative margin keeps a replica that reproduces the data exactly
+    // from counting as better or worse by rounding alone.
+    if (r.deviance >= observed_deviance - 1e-9 * (1.0 + observed_deviance)) ++at_least;
+  }
+  // As Palamedes (PAL_PFML_GoodnessOfFit) and psignifit: the plain fraction.
+  g.p_value = g.simulations > 0 ? static_cast<double>(at_least) / g.simulations : kNaN;
+  return g;
+}
+
 }  // namespace
 
 Result<GoodnessOfFit> goodness_of_fit(const std::vector<StimulusLevel>& raw, const FitOptions& options,
-                                      const PsychometricFit& fit, int simulations, std::uint64_t seed) {
+                                      const PsychometricFit& fit, int simulations, std::uint64_t seed, int threads) {
   if (simulations < 1) return make_error(Errc::invalid_argument, "goodness of fit needs at least one simulation");
+  if (Status s = validate_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
-  const std::vector<StimulusLevel> data = used_levels(raw);
-  Rng rng(seed);
-  GoodnessOfFit g;
-  g.deviance = deviance(fit.model, fit.params, data);
-  g.simulations = simulations;
-  int at_least = 0;
-  for (int i = 0; i < simulations; ++i) {
-    const std::vector<StimulusLevel> sim = simulate(data, fit.model, fit.params, rng);
-    Result<PsychometricFit> refit = fit_psychometric_from(sim, options, fit.params);
-    if (!refit) return refit.error();
-    if (refit->deviance >= g.deviance) ++at_least;
+  const Likelihood lk(used_levels(raw), options);
+  const std::vector<Replica> replicas = simulate_replicas(lk, fit, simulations, seed, threads, 0.5);
+  GoodnessOfFit g = goodness_from(replicas, lk.deviance(lk.theta(fit.params)));
+  if (g.simulations == 0) {
+    return make_error(Errc::invalid_argument, "no simulated data set could be refitted; check the data and the fit");
   }
-  // As Palamedes (PAL_PFML_GoodnessOfFit): the plain fraction.
-  g.p_value = static_cast<double>(at_least) / simulations;
   return g;
+}
+
+double jackknife_acceleration(const std::vector<double>& values, const std::vector<double>& weights) {
+  double total = 0.0, mean = 0.0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    mean += weights[i] * values[i];
+    total += weights[i];
+  }
+  if (!(total > 0.0)) return 0.0;
+  mean /= total;
+  double num = 0.0, den = 0.0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const double d = mean - values[i];
+    num += weights[i] * d * d * d;
+    den += weights[i] * d * d;
+  }
+  return den > 0.0 ? num / (6.0 * std::pow(den, 1.5)) : 0.0;
 }
 
 double quantile_sorted(const std::vector<double>& sorted, double q) {
@@ -416,27 +943,29 @@ Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>&
     return make_error(Errc::invalid_argument,
                       fmt::format("confidence level {} must lie in (0, 1), e.g. 0.95", bootstrap.coverage));
   }
+  if (Status s = validate_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
   const std::vector<StimulusLevel> data = used_levels(raw);
   std::array<double, kStats> observed{};
   if (!statistics_of(fit, bootstrap.threshold_proportion, observed)) {
     return threshold_at(fit.model, fit.params, bootstrap.threshold_proportion).error();
   }
+  const Likelihood base(data, options);
+  const std::vector<Replica> replicas = simulate_replicas(base, fit, bootstrap.samples, bootstrap.seed,
+                                                          bootstrap.threads, bootstrap.threshold_proportion);
 
-  Rng rng(bootstrap.seed);
   std::array<std::vector<double>, kStats> samples;
   BootstrapResult result;
   result.coverage = bootstrap.coverage;
   result.threshold_proportion = bootstrap.threshold_proportion;
-  for (int i = 0; i < bootstrap.samples; ++i) {
-    const std::vector<StimulusLevel> sim = simulate(data, fit.model, fit.params, rng);
-    Result<PsychometricFit> refit = fit_psychometric_from(sim, options, fit.params);
-    std::array<double, kStats> stats{};
-    if (!refit || !statistics_of(*refit, bootstrap.threshold_proportion, stats)) {
+  result.goodness_of_fit = goodness_from(replicas, base.deviance(base.theta(fit.params)));
+  for (const Replica& r : replicas) {
+    if (r.steep) ++result.steep_refits;
+    if (!r.has_statistics) {
       ++result.failed_fits;
       continue;
     }
-    for (std::size_t k = 0; k < kStats; ++k) samples[k].push_back(stats[k]);
+    for (std::size_t k = 0; k < kStats; ++k) samples[k].push_back(r.statistics[k]);
   }
   result.samples = static_cast<int>(samples[0].size());
   if (result.samples < 10) {
@@ -447,45 +976,40 @@ Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>&
 
   // Jackknife (leave one trial out) for the BCa acceleration. With binomial
   // data only two distinct deletions exist per level: a correct or an
-  // incorrect trial, weighted by how many of each there are.
+  // incorrect trial, weighted by how many of each there are. docs/study.md
+  // derives why this (and not a smaller value) is the acceleration.
   std::array<double, kStats> acceleration{};
   bool have_acceleration = false;
   if (bootstrap.bca) {
-    std::vector<std::pair<std::array<double, kStats>, double>> jack;  // (statistics, weight)
+    std::array<std::vector<double>, kStats> jack;
+    std::vector<double> weights;
+    Likelihood lk = base;
+    const StartGrid grid = refit_grid(base);
+    std::vector<double> scores;
     bool ok = true;
     for (std::size_t l = 0; l < data.size() && ok; ++l) {
       for (int drop_correct = 0; drop_correct < 2 && ok; ++drop_correct) {
         const int weight = drop_correct ? data[l].correct : data[l].trials - data[l].correct;
         if (weight == 0) continue;
-        std::vector<StimulusLevel> d = data;
-        d[l].trials -= 1;
-        d[l].correct -= drop_correct;
-        Result<PsychometricFit> refit = fit_psychometric_from(d, options, fit.params);
+        lk.levels() = base.levels();
+        lk.levels()[l].n -= 1.0;
+        lk.levels()[l].k -= drop_correct;
+        const Solution s = refit(lk, grid, scores);
+        PsychometricFit f;
+        f.model = fit.model;
+        f.params = lk.params(s.theta);
         std::array<double, kStats> stats{};
-        if (!refit || !statistics_of(*refit, bootstrap.threshold_proportion, stats)) {
+        if (!std::isfinite(s.log_likelihood) || !statistics_of(f, bootstrap.threshold_proportion, stats)) {
           ok = false;
           break;
         }
-        jack.emplace_back(stats, weight);
+        for (std::size_t k = 0; k < kStats; ++k) jack[k].push_back(stats[k]);
+        weights.push_back(weight);
       }
     }
-    if (ok && !jack.empty()) {
+    if (ok && !weights.empty()) {
       have_acceleration = true;
-      for (std::size_t k = 0; k < kStats; ++k) {
-        double total = 0.0, mean = 0.0;
-        for (const auto& [s, w] : jack) {
-          mean += w * s[k];
-          total += w;
-        }
-        mean /= total;
-        double num = 0.0, den = 0.0;
-        for (const auto& [s, w] : jack) {
-          const double d = mean - s[k];
-          num += w * d * d * d;
-          den += w * d * d;
-        }
-        acceleration[k] = den > 0.0 ? num / (6.0 * std::pow(den, 1.5)) : 0.0;
-      }
+      for (std::size_t k = 0; k < kStats; ++k) acceleration[k] = jackknife_acceleration(jack[k], weights);
     }
   }
 
@@ -505,6 +1029,8 @@ Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>&
     e.standard_error = std::sqrt(ss / static_cast<double>(v.size() - 1));
     e.percentile = {quantile_sorted(v, tail), quantile_sorted(v, 1.0 - tail)};
     e.bca = {kNaN, kNaN};
+    e.bias_correction = kNaN;
+    e.acceleration = have_acceleration ? acceleration[k] : kNaN;
     if (!have_acceleration) continue;
     // Bias correction: where the estimate falls in its bootstrap distribution
     // (ties count half, so a parameter fixed by the options gets z0 = 0).
@@ -514,6 +1040,7 @@ Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>&
     if (!(fraction > 0.0 && fraction < 1.0)) continue;
     const double z0 = standard_normal_quantile(fraction);
     const double a = acceleration[k];
+    e.bias_correction = z0;
     auto adjusted = [&](double q) {
       const double z = standard_normal_quantile(q);
       return standard_normal_cdf(z0 + (z0 + z) / (1.0 - a * (z0 + z)));

@@ -1,19 +1,25 @@
 #include "proprio/study/session.hpp"
 
 #include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fmt/format.h>
-#include <fstream>
+#include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
-#include <sstream>
+#include <utility>
 
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/study/csv.hpp"
 
@@ -66,22 +72,11 @@ void sync_directory(const std::filesystem::path& dir) {
   ::close(fd);
 }
 
-// The sidecar is replaced atomically: write a temporary file, fsync, rename.
+// The sidecar is the session's own file, read on resume and replaced after
+// every trial, atomically.
 Status write_json_atomically(const std::filesystem::path& path, const json& j) {
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    return make_error(Errc::io_error, fmt::format("cannot write {}: {}", tmp.string(), errno_text()));
-  }
-  Status s = write_all(fd, j.dump(2) + "\n", tmp);
-  ::close(fd);
-  if (!s) return s;
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    return make_error(Errc::io_error, fmt::format("cannot rename {} to {}: {}", tmp.string(), path.string(),
-                                                  errno_text()));
-  }
-  sync_directory(path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path());
-  return Status::success();
+  forget_input_file(path);
+  return write_file_atomic(path, j.dump(2) + "\n", "session sidecar");
 }
 
 bool is_identifier(const std::string& s) {
@@ -114,7 +109,118 @@ std::vector<std::string> columns_of(const StudyDesign& d) {
 
 std::string hex64(std::uint64_t v) { return fmt::format("{:016x}", v); }
 
+// The study folders this process holds, by device and inode (so "D", "./D"
+// and a symlink to D are one folder), with the sessions open in each.
+struct HeldFolder {
+  dev_t dev = 0;
+  ino_t ino = 0;
+  FolderLock lock;
+  int holders = 0;
+  std::set<std::string> open_sessions;
+};
+std::mutex g_held_mutex;
+std::map<std::uint64_t, HeldFolder>& held_folders() {
+  static std::map<std::uint64_t, HeldFolder> held;
+  return held;
+}
+std::uint64_t g_next_held_id = 1;
+
+HeldFolder* held_folder_at(const struct stat& st) {
+  for (auto& [id, h] : held_folders()) {
+    if (h.dev == st.st_dev && h.ino == st.st_ino) return &h;
+  }
+  return nullptr;
+}
+
 }  // namespace
+
+Result<StudyFolderLock> StudyFolderLock::acquire(const std::filesystem::path& dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    return make_error(Errc::io_error, fmt::format("cannot create the output folder {}: {}", printable(dir.string()),
+                                                  ec.message()));
+  }
+  struct stat st {};
+  if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("{} is not a folder; choose another --out", printable(dir.string())));
+  }
+  std::lock_guard guard(g_held_mutex);
+  StudyFolderLock out;
+  for (auto& [id, h] : held_folders()) {
+    if (h.dev == st.st_dev && h.ino == st.st_ino) {
+      ++h.holders;
+      out.id_ = id;
+      return out;
+    }
+  }
+  auto lock = FolderLock::acquire(dir, "study folder");
+  if (!lock) return lock.error();
+  const std::uint64_t id = g_next_held_id++;
+  HeldFolder& h = held_folders()[id];
+  h.dev = st.st_dev;
+  h.ino = st.st_ino;
+  h.lock = std::move(*lock);
+  h.holders = 1;
+  out.id_ = id;
+  return out;
+}
+
+StudyFolderLock::StudyFolderLock(StudyFolderLock&& other) noexcept : id_(std::exchange(other.id_, 0)) {}
+StudyFolderLock& StudyFolderLock::operator=(StudyFolderLock&& other) noexcept {
+  if (this != &other) {
+    release();
+    id_ = std::exchange(other.id_, 0);
+  }
+  return *this;
+}
+StudyFolderLock::~StudyFolderLock() { release(); }
+
+void StudyFolderLock::release() noexcept {
+  if (id_ == 0) return;
+  std::lock_guard guard(g_held_mutex);
+  const auto it = held_folders().find(id_);
+  if (it != held_folders().end() && --it->second.holders <= 0) held_folders().erase(it);
+  id_ = 0;
+}
+
+Status check_study_folder_not_in_use(const std::filesystem::path& dir) {
+  struct stat st {};
+  if (::stat(dir.c_str(), &st) != 0) return Status::success();
+  {
+    std::lock_guard guard(g_held_mutex);
+    if (held_folder_at(st) != nullptr) return Status::success();
+  }
+  const std::filesystem::path file = dir / FolderLock::kFileName;
+  // Read-only and non-blocking: probing must neither create a file in the
+  // data folder nor hang on a FIFO planted under the lock's name.
+  const int fd = ::open(file.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return Status::success();  // no study has run here with a lock
+  struct stat fst {};
+  if (::fstat(fd, &fst) != 0 || !S_ISREG(fst.st_mode)) {
+    ::close(fd);
+    return Status::success();
+  }
+  Status result = Status::success();
+  if (::flock(fd, LOCK_SH | LOCK_NB) != 0) {
+    if (errno == EWOULDBLOCK) {
+      char buf[32] = {};
+      const ssize_t n = ::pread(fd, buf, sizeof buf - 1, 0);
+      std::string owner = n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string();
+      while (!owner.empty() && (owner.back() == '\n' || owner.back() == ' ')) owner.pop_back();
+      result = make_error(Errc::unavailable,
+                          fmt::format("a study is running in {}{}: its files are still being written, so an "
+                                      "analysis now would see a partial study; wait for it to finish",
+                                      printable(dir.string()),
+                                      owner.empty() ? std::string() : " (pid " + printable(owner, 20) + ")"));
+    }
+  } else {
+    (void)::flock(fd, LOCK_UN);
+  }
+  ::close(fd);
+  return result;
+}
 
 std::filesystem::path session_csv_path(const StudyDesign& design, const SessionOptions& o) {
   return o.out_dir / fmt::format("{}_{}_s{}.csv", design.name, o.participant, o.session);
@@ -139,10 +245,18 @@ struct Session::Impl {
   std::filesystem::path csv_path, sidecar_path;
   bool resumed = false, torn = false;
   int recovered = 0;
+  std::vector<Session::RecordedTrial> recovered_list;
   json sidecar;
+  StudyFolderLock folder_lock;  // destroyed last: the files are closed before the folder is released
+  std::string claimed;          // this session's name in the held folder's open sessions
 
   ~Impl() {
     if (fd >= 0) ::close(fd);
+    if (!claimed.empty()) {
+      std::lock_guard guard(g_held_mutex);
+      const auto it = held_folders().find(folder_lock.id_);
+      if (it != held_folders().end()) it->second.open_sessions.erase(claimed);
+    }
   }
 
   // Moves the cursor to the next slot that yields a trial (adaptive slots
@@ -251,6 +365,18 @@ struct Session::Impl {
         return make_error(Errc::parse_error, fmt::format("{}: column '{}' must be 0 or 1, found '{}'", where,
                                                          design.response_column, response));
       }
+      Session::RecordedTrial rec{*pending, {}};
+      rec.response.correct = response == "1";
+      const std::string& rt = row[stimulus_col + 2];
+      if (!rt.empty()) {
+        char* end = nullptr;
+        const double v = std::strtod(rt.c_str(), &end);
+        if (end != rt.c_str() && *end == '\0' && std::isfinite(v)) rec.response.response_time_s = v;
+      }
+      for (std::size_t e = 0; e < design.extra_columns.size(); ++e) {
+        rec.response.extra[design.extra_columns[e]] = row[stimulus_col + 3 + e];
+      }
+      recovered_list.push_back(std::move(rec));
       apply(response == "1");
     }
     return Status::success();
@@ -289,22 +415,35 @@ Result<Session> Session::open(const StudyDesign& design, const SessionOptions& o
   s.csv_path = session_csv_path(design, options);
   s.sidecar_path = session_sidecar_path(design, options);
 
-  std::error_code ec;
-  std::filesystem::create_directories(options.out_dir, ec);
-  if (ec) {
-    return make_error(Errc::io_error, fmt::format("cannot create the output folder {}: {}", options.out_dir.string(),
-                                                  ec.message()));
+  // Before anything in the folder is read or written: a second process on
+  // the same folder would interleave and duplicate trials.
+  auto folder_lock = StudyFolderLock::acquire(options.out_dir);
+  if (!folder_lock) return folder_lock.error();
+  s.folder_lock = std::move(*folder_lock);
+  {
+    std::lock_guard guard(g_held_mutex);
+    HeldFolder& h = held_folders().at(s.folder_lock.id_);
+    const std::string name = s.csv_path.filename().string();
+    if (!h.open_sessions.insert(name).second) {
+      return make_error(Errc::unavailable,
+                        fmt::format("session {} is already open in this process; record its trials through that "
+                                    "Session object",
+                                    printable(s.csv_path.string())));
+    }
+    s.claimed = name;
   }
 
-  if (std::filesystem::exists(s.csv_path)) {
+  std::error_code ec;
+  if (std::filesystem::exists(s.csv_path, ec) || std::filesystem::is_symlink(s.csv_path, ec)) {
     // Resume.
-    std::ifstream sin(s.sidecar_path);
-    if (!sin) {
+    if (!std::filesystem::exists(s.sidecar_path, ec)) {
       return make_error(Errc::not_found,
                         fmt::format("{} exists but its sidecar {} does not; move the CSV away to start over",
                                     s.csv_path.string(), s.sidecar_path.string()));
     }
-    s.sidecar = json::parse(sin, nullptr, false);
+    auto sidecar_text = read_input_file(s.sidecar_path, "session sidecar");
+    if (!sidecar_text) return sidecar_text.error();
+    s.sidecar = json::parse(*sidecar_text, nullptr, false);
     if (s.sidecar.is_discarded() || !s.sidecar.is_object()) {
       return make_error(Errc::parse_error, fmt::format("{} is not valid JSON", s.sidecar_path.string()));
     }
@@ -323,13 +462,9 @@ Result<Session> Session::open(const StudyDesign& design, const SessionOptions& o
     }
     // A crash mid-write can leave a last row without its newline: cut it off
     // (that trial was never confirmed, so it is run again).
-    std::string text;
-    {
-      std::ifstream cin(s.csv_path, std::ios::binary);
-      std::ostringstream buf;
-      buf << cin.rdbuf();
-      text = buf.str();
-    }
+    auto csv_text = read_input_file(s.csv_path, "session CSV");
+    if (!csv_text) return csv_text.error();
+    std::string text = std::move(*csv_text);
     if (!text.empty() && text.back() != '\n') {
       const std::size_t keep = text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1;
       if (::truncate(s.csv_path.c_str(), static_cast<off_t>(keep)) != 0) {
@@ -479,6 +614,7 @@ int Session::planned_trials() const { return static_cast<int>(impl_->plan.size()
 bool Session::resumed() const { return impl_->resumed; }
 int Session::recovered_trials() const { return impl_->recovered; }
 bool Session::repaired_torn_row() const { return impl_->torn; }
+const std::vector<Session::RecordedTrial>& Session::recovered_trial_list() const { return impl_->recovered_list; }
 std::uint64_t Session::participant_seed() const { return impl_->participant_seed; }
 const std::filesystem::path& Session::csv_path() const { return impl_->csv_path; }
 const std::filesystem::path& Session::sidecar_path() const { return impl_->sidecar_path; }

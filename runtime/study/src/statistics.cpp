@@ -25,10 +25,16 @@ Status all_finite(const std::vector<double>& x, const std::string& what) {
   return Status::success();
 }
 
-// Upper tail of F(df1, df2) beyond f; 0 for an infinite f (no error variance).
+// The scale round-off is judged against: the larger of the centred total and
+// the data's raw sum of squares times the relative tolerance (all-equal
+// values of 0.1 leave ~1e-30 of centred "variance" behind).
+double round_off_floor(double ss_total, double ss_raw) {
+  return kRoundOffRelative * std::max(ss_total, 1e-8 * ss_raw);
+}
+
+// Upper tail of F(df1, df2) beyond f.
 double f_upper_tail(double f, double df1, double df2) {
-  if (std::isinf(f)) return 0.0;
-  if (!(f >= 0.0)) return kNaN;
+  if (!(f >= 0.0) || std::isinf(f)) return kNaN;
   return boost::math::cdf(boost::math::complement(boost::math::fisher_f_distribution<double>(df1, df2), f));
 }
 
@@ -69,19 +75,30 @@ Result<OneWayAnova> one_way_anova(const std::vector<std::vector<double>>& groups
   }
   grand /= static_cast<double>(total_n);
   OneWayAnova a;
+  double ss_raw = 0.0;
   for (const std::vector<double>& g : groups) {
     const double m = mean(g);
     a.ss_between += static_cast<double>(g.size()) * (m - grand) * (m - grand);
-    for (double v : g) a.ss_within += (v - m) * (v - m);
+    for (double v : g) {
+      a.ss_within += (v - m) * (v - m);
+      ss_raw += v * v;
+    }
   }
   a.df_between = static_cast<double>(groups.size() - 1);
   a.df_within = static_cast<double>(total_n - groups.size());
-  const double ms_within = a.ss_within / a.df_within;
-  a.f = ms_within > 0.0 ? (a.ss_between / a.df_between) / ms_within
-                        : (a.ss_between > 0.0 ? std::numeric_limits<double>::infinity() : kNaN);
+  const double floor = round_off_floor(a.ss_between + a.ss_within, ss_raw);
+  if (a.ss_between <= floor) a.ss_between = 0.0;
+  if (a.ss_within <= floor) a.ss_within = 0.0;
+  if (a.ss_within == 0.0) {
+    a.testable = false;
+    a.not_testable_reason = a.ss_between == 0.0 ? "every value is the same: no variance to test"
+                                                : "no variance within any group: the test needs spread within groups";
+    a.f = a.p = a.eta_squared = kNaN;
+    return a;
+  }
+  a.f = (a.ss_between / a.df_between) / (a.ss_within / a.df_within);
   a.p = f_upper_tail(a.f, a.df_between, a.df_within);
-  const double ss_total = a.ss_between + a.ss_within;
-  a.eta_squared = ss_total > 0.0 ? a.ss_between / ss_total : kNaN;
+  a.eta_squared = a.ss_between / (a.ss_between + a.ss_within);
   return a;
 }
 
@@ -118,21 +135,44 @@ Result<RepeatedMeasuresAnova> repeated_measures_anova(const std::vector<std::vec
   RepeatedMeasuresAnova a;
   a.subjects = static_cast<int>(n);
   a.conditions = static_cast<int>(k);
-  double ss_total = 0.0;
+  double ss_total = 0.0, ss_raw = 0.0;
   for (std::size_t s = 0; s < n; ++s) {
-    for (std::size_t c = 0; c < k; ++c) ss_total += (data[s][c] - grand) * (data[s][c] - grand);
+    for (std::size_t c = 0; c < k; ++c) {
+      ss_total += (data[s][c] - grand) * (data[s][c] - grand);
+      ss_raw += data[s][c] * data[s][c];
+    }
   }
   for (std::size_t c = 0; c < k; ++c) a.ss_conditions += dn * (condition_mean[c] - grand) * (condition_mean[c] - grand);
   for (std::size_t s = 0; s < n; ++s) a.ss_subjects += dk * (subject_mean[s] - grand) * (subject_mean[s] - grand);
-  a.ss_error = std::max(0.0, ss_total - a.ss_conditions - a.ss_subjects);
+  // The error term as the residual of the subject x condition table, not as
+  // a difference of totals: the difference leaves round-off behind.
+  for (std::size_t s = 0; s < n; ++s) {
+    for (std::size_t c = 0; c < k; ++c) {
+      const double r = data[s][c] - subject_mean[s] - condition_mean[c] + grand;
+      a.ss_error += r * r;
+    }
+  }
+  const double floor = round_off_floor(ss_total, ss_raw);
+  if (a.ss_conditions <= floor) a.ss_conditions = 0.0;
+  if (a.ss_subjects <= floor) a.ss_subjects = 0.0;
+  if (a.ss_error <= floor) a.ss_error = 0.0;
   a.df_conditions = dk - 1.0;
   a.df_error = (dk - 1.0) * (dn - 1.0);
-  const double ms_error = a.ss_error / a.df_error;
-  a.f = ms_error > 0.0 ? (a.ss_conditions / a.df_conditions) / ms_error
-                       : (a.ss_conditions > 0.0 ? std::numeric_limits<double>::infinity() : kNaN);
+  if (a.ss_error == 0.0) {
+    a.testable = false;
+    a.not_testable_reason =
+        a.ss_conditions == 0.0 && a.ss_subjects == 0.0
+            ? "every value is the same: no variance to test"
+            : "no error variance: every subject differs between the conditions by exactly the same amounts "
+              "(e.g. everyone at ceiling), so F would be infinite or 0/0";
+    a.f = a.p = a.gg_p = a.partial_eta_squared = kNaN;
+    a.gg_df_conditions = a.df_conditions;
+    a.gg_df_error = a.df_error;
+    return a;
+  }
+  a.f = (a.ss_conditions / a.df_conditions) / (a.ss_error / a.df_error);
   a.p = f_upper_tail(a.f, a.df_conditions, a.df_error);
-  a.partial_eta_squared = (a.ss_conditions + a.ss_error) > 0.0 ? a.ss_conditions / (a.ss_conditions + a.ss_error)
-                                                                 : kNaN;
+  a.partial_eta_squared = a.ss_conditions / (a.ss_conditions + a.ss_error);
 
   // Greenhouse-Geisser epsilon from the double-centred covariance matrix of
   // the conditions: eps = (trace S*)^2 / ((k - 1) * sum S*_ij^2).
@@ -190,19 +230,27 @@ Result<PairedT> paired_t_test(const std::vector<double>& a, const std::vector<do
   t.mean_difference = mean(d);
   t.sd_difference = sample_sd(d);
   t.df = static_cast<double>(d.size() - 1);
+  double ss = 0.0, ss_raw = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ss += (d[i] - t.mean_difference) * (d[i] - t.mean_difference);
+    ss_raw += a[i] * a[i] + b[i] * b[i];
+  }
+  if (ss <= round_off_floor(ss, ss_raw + static_cast<double>(d.size()) * t.mean_difference * t.mean_difference)) {
+    t.sd_difference = 0.0;
+    t.testable = false;
+    t.not_testable_reason = t.mean_difference == 0.0
+                                ? "the two conditions are identical for every subject: nothing to test"
+                                : "every subject differs by exactly the same amount: no spread to test against";
+    t.t = t.p = t.cohen_dz = kNaN;
+    t.ci_lower = t.ci_upper = t.mean_difference;
+    return t;
+  }
   const double se = t.sd_difference / std::sqrt(static_cast<double>(d.size()));
   const boost::math::students_t_distribution<double> dist(t.df);
   const double t_crit = boost::math::quantile(boost::math::complement(dist, 0.5 * (1.0 - coverage)));
-  if (se > 0.0) {
-    t.t = t.mean_difference / se;
-    t.p = 2.0 * boost::math::cdf(boost::math::complement(dist, std::abs(t.t)));
-    t.cohen_dz = t.mean_difference / t.sd_difference;
-  } else {
-    // Every difference is equal: no spread to test against.
-    t.t = t.mean_difference == 0.0 ? kNaN : std::copysign(std::numeric_limits<double>::infinity(), t.mean_difference);
-    t.p = t.mean_difference == 0.0 ? 1.0 : 0.0;
-    t.cohen_dz = kNaN;
-  }
+  t.t = t.mean_difference / se;
+  t.p = 2.0 * boost::math::cdf(boost::math::complement(dist, std::abs(t.t)));
+  t.cohen_dz = t.mean_difference / t.sd_difference;
   t.ci_lower = t.mean_difference - t_crit * se;
   t.ci_upper = t.mean_difference + t_crit * se;
   return t;
@@ -225,18 +273,23 @@ const char* to_string(PAdjust method) noexcept {
   return "?";
 }
 
+// Tests that were not testable (NaN p) are not comparisons: they stay NaN
+// and do not count in the number of comparisons.
 std::vector<double> bonferroni(const std::vector<double>& p) {
+  const auto m = static_cast<double>(std::count_if(p.begin(), p.end(), [](double v) { return !std::isnan(v); }));
   std::vector<double> out(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) out[i] = std::min(1.0, p[i] * static_cast<double>(p.size()));
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = std::isnan(p[i]) ? kNaN : std::min(1.0, p[i] * m);
   return out;
 }
 
 std::vector<double> holm(const std::vector<double>& p) {
-  const std::size_t m = p.size();
-  std::vector<std::size_t> order(m);
-  std::iota(order.begin(), order.end(), 0);
+  std::vector<std::size_t> order;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!std::isnan(p[i])) order.push_back(i);
+  }
+  const std::size_t m = order.size();
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return p[a] < p[b]; });
-  std::vector<double> out(m);
+  std::vector<double> out(p.size(), kNaN);
   double running = 0.0;  // adjusted p-values never decrease along the sorted order
   for (std::size_t r = 0; r < m; ++r) {
     running = std::max(running, std::min(1.0, static_cast<double>(m - r) * p[order[r]]));

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::peg_in_hole {
 namespace {
@@ -124,13 +125,9 @@ std::string PegInHoleConfig::describe() const {
 }
 
 Result<PegInHoleConfig> PegInHoleConfig::load_file(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return make_error(Errc::not_found, fmt::format("cannot open the peg-in-hole config {}: check the path", path.string()));
-  }
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path.string());
+  auto text = read_input_file(path, "peg-in-hole config");
+  if (!text) return text.error();
+  return parse(*text, path.string());
 }
 
 Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, const std::string& source_name) {

@@ -162,6 +162,9 @@ Result<int> run_live_session(const PegInHoleConfig& config, const LiveStudyOptio
   so.participant = options.participant;
   so.participant_index = options.participant_index >= 0 ? options.participant_index : index_from_id(options.participant);
   so.device_json = nlohmann::json{{"participant_kind", "real"}, {"config", config.describe()}}.dump();
+  // Before the session files are looked at or deleted (--force).
+  auto folder_lock = study::StudyFolderLock::acquire(options.out_dir);
+  if (!folder_lock) return folder_lock.error();
   const fs::path csv = study::session_csv_path(*design, so);
   if (fs::exists(csv) && !options.resume) {
     if (!options.force) {

@@ -175,8 +175,10 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
     shared.report.trials_recovered += session->recovered_trials();
     shared.report.csv_files.push_back(session->csv_path());
   }
-  // The participant: its hand and its seed; it learns across trials, so a
-  // resumed participant replays its familiarisation (its state is not saved).
+  // The participant: its hand and its seed. It learns across trials and its
+  // state is not saved, so a resumed participant goes through its
+  // familiarisation and the trials already on disk again (without touching
+  // their recordings) and then continues exactly as an uninterrupted run would.
   const std::uint64_t pseed = session->participant_seed();
   auto shape = simulated_participant_hand(config.sim_user);
   if (!shape) return shape.error();
@@ -184,7 +186,7 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
   SimulatedUser user(config, hand, mix_seed(pseed, 0x55534552));
   const fs::path rec_dir = options.out_dir / "recordings";
   if (config.recording.enabled) fs::create_directories(rec_dir);
-  if (options.familiarisation && session->completed_trials() == 0) {
+  if (options.familiarisation) {
     const TrialLayout layout = trial_layout(config, pseed, -1);
     for (auto [phase, seconds] : {std::pair{WorldPhase::spring, config.familiarisation.spring_phase_s},
                                   std::pair{WorldPhase::ground, config.familiarisation.ground_phase_s}}) {
@@ -202,6 +204,37 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
       }
     }
   }
+  const auto rec_name_of = [&id](int trial_index) {
+    return fmt::format("{}_trial{:02d}.prec", id, trial_index + 1);
+  };
+  for (const study::Session::RecordedTrial& rec : session->recovered_trial_list()) {
+    const Setting setting = setting_of(rec.trial.levels);
+    const TrialLayout layout = trial_layout(config, pseed, rec.trial.index);
+    SimulatedTrialOptions to;
+    to.time_limit_s = config.main_task.trial_timeout_s;
+    auto r = run_simulated_trial(config, layout, setting, user, hand, device, to);
+    if (!r) return r.error();
+    const study::Response again = trial_response(
+        config, rec.trial.index, setting, layout,
+        {r->completed, r->completion_time_s, r->breaks, r->drops, r->peak_force_n, r->mean_force_n,
+         config.recording.enabled ? "recordings/" + rec_name_of(rec.trial.index) : "", "simulated"});
+    bool same = again.correct == rec.response.correct;
+    for (const auto& [column, value] : again.extra) {
+      const auto it = rec.response.extra.find(column);
+      same = same && it != rec.response.extra.end() && it->second == value;
+    }
+    if (!same) {
+      return make_error(Errc::invalid_argument,
+                        fmt::format("{}: trial {} on disk is not what this simulation does when it replays the "
+                                    "recorded trials (written by another version or configuration?); start over "
+                                    "with --force, or use another --out",
+                                    session->csv_path().string(), rec.trial.index + 1));
+    }
+    if (options.progress) {
+      options.progress(fmt::format("{} trial {:2d}/{}: replayed (recorded before the resume)", id,
+                                   rec.trial.index + 1, session->planned_trials()));
+    }
+  }
   while (!session->finished() && !shared.stop.load()) {
     auto trial = session->next_trial();
     if (!trial) return trial.error();
@@ -209,7 +242,7 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
     const TrialLayout layout = trial_layout(config, pseed, trial->index);
     SimulatedTrialOptions to;
     to.time_limit_s = config.main_task.trial_timeout_s;
-    const std::string rec_name = fmt::format("{}_trial{:02d}.prec", id, trial->index + 1);
+    const std::string rec_name = rec_name_of(trial->index);
     if (config.recording.enabled) {
       to.recording = rec_dir / rec_name;
       to.recording_rate_hz = config.recording.rate_hz;
@@ -250,6 +283,10 @@ Result<SimulatedStudyReport> run_simulated_study(const PegInHoleConfig& config_i
   if (options.out_dir.empty()) return make_error(Errc::invalid_argument, "an output folder (--out) is needed");
   auto design = study_design(config);
   if (!design) return design.error();
+  // Before looking for, deleting or appending to sessions: a second process
+  // on this folder would interleave and duplicate trials.
+  auto folder_lock = study::StudyFolderLock::acquire(options.out_dir);
+  if (!folder_lock) return folder_lock.error();
   std::error_code ec;
   if (fs::exists(options.out_dir) && !fs::is_empty(options.out_dir, ec)) {
     bool has_sessions = false;

@@ -163,11 +163,21 @@ Result<PerceptionReport> analyze_perception_study(const fs::path& dir, const Per
   }
   if (an.threshold_anova) {
     const auto& t = *an.threshold_anova;
+    if (!t.testable) {
+      md += fmt::format("\nRepeated-measures ANOVA on the interpolated thresholds ({} participants with all three "
+                        "conditions): not testable: {}\n",
+                        t.subjects, t.not_testable_reason);
+    } else {
     md += fmt::format("\nRepeated-measures ANOVA on the interpolated thresholds ({} participants with all three "
                       "conditions): F({:.0f}, {:.0f}) = {:.2f}, p = {:.4f}; Greenhouse-Geisser epsilon = {:.3f}, "
                       "p = {:.4f}; partial eta^2 = {:.3f}\n",
                       t.subjects, t.df_conditions, t.df_error, t.f, t.p, t.gg_epsilon, t.gg_p, t.partial_eta_squared);
+    }
     for (const auto& c : an.comparisons) {
+      if (!c.test.testable) {
+        md += fmt::format("- {} vs {}: not testable: {}\n", c.a, c.b, c.test.not_testable_reason);
+        continue;
+      }
       md += fmt::format("- {} vs {}: mean difference {:.2f} cm, t({:.0f}) = {:.2f}, p = {:.4f} (Holm {:.4f})\n", c.a,
                         c.b, c.test.mean_difference, c.test.df, c.test.t, c.test.p, c.p_holm);
     }
@@ -175,15 +185,16 @@ Result<PerceptionReport> analyze_perception_study(const fs::path& dir, const Per
   md += "\nOne-way ANOVA across haptic conditions on the proportion correct at each offset (the thesis's test), and "
         "the repeated-measures version:\n\n| offset | one-way F | p | repeated-measures F | p (GG) |\n|---|---|---|---|---|\n";
   for (const auto& l : an.level_anovas) {
+    const bool ow = l.one_way && l.one_way->testable, rm = l.repeated && l.repeated->testable;
     md += fmt::format("| {:g} | {} | {} | {} | {} |\n", l.level,
-                      l.one_way ? fmt::format("F({:.0f}, {:.0f}) = {:.2f}", l.one_way->df_between, l.one_way->df_within,
-                                              l.one_way->f)
-                                : "-",
-                      l.one_way ? fmt::format("{:.4f}", l.one_way->p) : "-",
-                      l.repeated ? fmt::format("F({:.0f}, {:.0f}) = {:.2f}", l.repeated->df_conditions,
-                                               l.repeated->df_error, l.repeated->f)
-                                 : "-",
-                      l.repeated ? fmt::format("{:.4f}", l.repeated->gg_p) : "-");
+                      ow ? fmt::format("F({:.0f}, {:.0f}) = {:.2f}", l.one_way->df_between, l.one_way->df_within,
+                                       l.one_way->f)
+                         : l.one_way ? "not testable" : "-",
+                      ow ? fmt::format("{:.4f}", l.one_way->p) : "-",
+                      rm ? fmt::format("F({:.0f}, {:.0f}) = {:.2f}", l.repeated->df_conditions, l.repeated->df_error,
+                                       l.repeated->f)
+                         : l.repeated ? "not testable" : "-",
+                      rm ? fmt::format("{:.4f}", l.repeated->gg_p) : "-");
   }
   for (const auto& n : an.notes) md += "\nNote: " + n;
   return r;

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "proprio/core/file_io.hpp"
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
 #include "proprio/perception_threshold/observer.hpp"
@@ -222,13 +223,41 @@ Status run_participant(const PerceptionProtocol& protocol, const study::StudyDes
   ForceChannel channel(model, sink);
   const Pose T_world_view = simulated_head(protocol);
   const PlacedScene scene = PlacedScene::place(protocol, T_world_view);
-  // The observer's and the finger's randomness continue where the crashed
-  // run stopped only statistically: they are seeded per participant and run.
-  SimulatedObserver observer(protocol.observer, out.proprioceptive_noise_cm,
-                             mix_seed(out.seed, kObserverStream + 100 * static_cast<std::uint64_t>(out.trials_recovered)));
-  SimulatedParticipantRun run(protocol, scene, T_world_view, channel, observer,
-                              mix_seed(out.seed, kMotorStream + 100 * static_cast<std::uint64_t>(out.trials_recovered)));
+  // The observer, the finger and the device carry state from trial to trial
+  // (random streams, the finger's position and wander), so a resumed
+  // participant first lives through the trials already on disk again:
+  // what follows is then exactly what an uninterrupted run would have done.
+  SimulatedObserver observer(protocol.observer, out.proprioceptive_noise_cm, mix_seed(out.seed, kObserverStream));
+  SimulatedParticipantRun run(protocol, scene, T_world_view, channel, observer, mix_seed(out.seed, kMotorStream));
   TimeNs now = kNsPerSecond;
+  const auto count = [&out](const TrialPresentation& presentation, const TrialResult& r) {
+    out.peak_device_force_n = std::max(out.peak_device_force_n, r.peak_force_n);
+    if (presentation.haptic != HapticTarget::none) {
+      ++out.haptic_answers;
+      if (r.attribution > 0) ++out.correct_attributions;
+    }
+  };
+  for (const study::Session::RecordedTrial& rec : session->recovered_trial_list()) {
+    auto presentation = make_presentation(rec.trial, design, out.seed);
+    if (!presentation) return presentation.error();
+    const TrialResult r = run.run(*presentation, now);
+    ticks += r.ticks;
+    study::Response again;
+    fill_response_columns(*presentation, r.chose_true, r.peak_force_n, again);
+    bool same = again.correct == rec.response.correct;
+    for (const auto& [column, value] : again.extra) {
+      const auto it = rec.response.extra.find(column);
+      same = same && it != rec.response.extra.end() && it->second == value;
+    }
+    if (!same) {
+      return make_error(Errc::invalid_argument,
+                        fmt::format("{}: trial {} on disk is not what this simulation answers when it replays the "
+                                    "recorded trials (written by another version or observer model?); start the "
+                                    "simulated study over with --force, or use another --out",
+                                    session->csv_path().string(), rec.trial.index));
+    }
+    count(*presentation, r);
+  }
   while (!session->finished()) {
     if (options.stop_after_trials >= 0 && out.trials_run >= options.stop_after_trials) break;
     auto trial = session->next_trial();
@@ -242,11 +271,7 @@ Status run_participant(const PerceptionProtocol& protocol, const study::StudyDes
     response.response_time_s = 0.0;  // the model answers at once
     if (auto s = session->record(*trial, response); !s) return s.error();
     ++out.trials_run;
-    out.peak_device_force_n = std::max(out.peak_device_force_n, r.peak_force_n);
-    if (presentation->haptic != HapticTarget::none) {
-      ++out.haptic_answers;
-      if (r.attribution > 0) ++out.correct_attributions;
-    }
+    count(*presentation, r);
     on_trial();
   }
   channel.disengage(now);
@@ -271,9 +296,11 @@ Result<SimulatedStudy> run_simulated_study(const PerceptionProtocol& protocol, c
   auto model_r = haptics::load_device_model(options.device_model);
   if (!model_r) return model_r.error().with_context("the emulated fingertip device");
   std::shared_ptr<const haptics::FingertipDeviceModel> model(std::move(*model_r));
+  // Held until the ground truth is written: --force deletes, the sessions
+  // append, and a second process must touch none of it.
+  auto folder_lock = study::StudyFolderLock::acquire(options.out_dir);
+  if (!folder_lock) return folder_lock.error();
   std::error_code ec;
-  std::filesystem::create_directories(options.out_dir, ec);
-  if (ec) return make_error(Errc::io_error, "cannot create " + options.out_dir.string() + ": " + ec.message());
 
   SimulatedStudy result;
   result.seed = design.seed;
@@ -365,9 +392,9 @@ Result<SimulatedStudy> run_simulated_study(const PerceptionProtocol& protocol, c
                               : nlohmann::json(nullptr)}};
   }
   result.ground_truth_json = options.out_dir / "ground_truth.json";
-  std::ofstream f(result.ground_truth_json);
-  f << truth.dump(2) << "\n";
-  if (!f) return make_error(Errc::io_error, "cannot write " + result.ground_truth_json.string());
+  if (Status s = write_file_atomic(result.ground_truth_json, truth.dump(2) + "\n", "ground truth"); !s) {
+    return s.error();
+  }
   return result;
 }
 

@@ -9,11 +9,14 @@
 // file's sidecar unless the options name them.
 #include <cstdint>
 #include <filesystem>
+#include <map>
+#include <set>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "proprio/core/result.hpp"
+#include "proprio/study/csv.hpp"
 #include "proprio/study/psychometric.hpp"
 #include "proprio/study/statistics.hpp"
 
@@ -39,6 +42,9 @@ struct StudyAnalysisOptions {
   double coverage = 0.95;
   // Which per-participant threshold the between-condition statistics use.
   ThresholdMethod method = ThresholdMethod::fit;
+  // Analyse sessions with trials missing from their plan (unfinished or
+  // damaged) instead of refusing them; the notes then name what is missing.
+  bool allow_incomplete = false;
 };
 
 struct CellAnalysis {
@@ -86,6 +92,32 @@ struct StudyAnalysis {
   std::vector<ConditionComparison> comparisons;
   std::vector<LevelAnova> level_anovas;
   std::vector<std::string> notes;    // skipped files, missing cells, ...
+};
+
+// The checks every analysis of session files makes before it counts a trial:
+// each (participant, session, trial) in one row only, each session in one
+// file only, and every trial of the session's plan present (from the sidecar:
+// planned_trials, status). Refusals name the file and line; with
+// allow_incomplete, missing trials become a note instead.
+class SessionFileChecker {
+ public:
+  explicit SessionFileChecker(bool allow_incomplete) : allow_incomplete_(allow_incomplete) {}
+  // `sidecar` may be empty (a CSV without one: only duplicates are checked).
+  Status add(const CsvTable& table, const std::filesystem::path& sidecar);
+  // After the last add(): the missing-trials verdict (an error, or with
+  // allow_incomplete a note per incomplete session).
+  Status finish(std::vector<std::string>& notes) const;
+
+ private:
+  struct Expected {
+    std::string file, status;
+    long long trials = 0;
+    std::set<long long> present;
+  };
+  bool allow_incomplete_;
+  std::vector<Expected> expected_;
+  std::map<std::string, std::string> trial_at_;    // "participant\x1fsession\x1ftrial" -> file:line
+  std::map<std::string, std::string> session_in_;  // "participant\x1fsession" -> file
 };
 
 Result<StudyAnalysis> analyze_study(const std::filesystem::path& dir, const StudyAnalysisOptions& options);

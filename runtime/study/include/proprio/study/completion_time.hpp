@@ -33,6 +33,9 @@ struct CompletionTimeOptions {
   std::string familiarisation_column = "familiarisation";  // 1 = not analysed; absent: all analysed
   std::string participant_column = "participant";
   enum class Unit { round, participant } unit = Unit::round;
+  // Folder analyses: sessions with trials missing from their plan are refused
+  // unless this is set (SessionFileChecker, analysis.hpp).
+  bool allow_incomplete = false;
 };
 
 struct CompletionTimeTrial {
@@ -70,6 +73,7 @@ struct CompletionTimeAnalysis {
   CompletionTimeOptions::Unit unit = CompletionTimeOptions::Unit::round;
   std::vector<PairwiseComparison> pairwise;  // on `unit`
   int excluded_trials = 0;                   // familiarisation rows skipped
+  std::vector<std::string> notes;            // incomplete sessions analysed anyway, ...
 };
 
 // From rows already read (one table per session file).

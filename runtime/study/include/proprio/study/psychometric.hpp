@@ -14,7 +14,9 @@
 // deviance against a Monte Carlo distribution from the fitted model, and a
 // seeded parametric bootstrap with percentile and BCa intervals.
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <utility>
 #include <string_view>
 #include <vector>
 
@@ -50,6 +52,10 @@ Result<double> threshold_at(PsychometricModel model, const PsychometricParams& p
 // dpsi/dx at x (multiply by the threshold's scale for a dimensionless slope).
 double slope_at(PsychometricModel model, const PsychometricParams& p, double x);
 
+// The most trials one level may hold (and the most a data file may hold in
+// all): counts are ints, and a bootstrap simulates every trial.
+inline constexpr int kMaxTrials = 1'000'000'000;
+
 // One stimulus level: how many of how many trials were correct.
 struct StimulusLevel {
   double level = 0.0;
@@ -57,8 +63,9 @@ struct StimulusLevel {
   int trials = 0;
 };
 
-// Checks levels for a fit: finite, counts within 0 <= correct <= trials, and
-// at least two levels with trials (Weibull additionally needs level > 0).
+// Checks levels for a fit: finite, counts within 0 <= correct <= trials <=
+// kMaxTrials, and at least two levels with trials (Weibull additionally needs
+// level > 0).
 Status validate_levels(PsychometricModel model, const std::vector<StimulusLevel>& data);
 
 struct FitOptions {
@@ -76,7 +83,31 @@ struct PsychometricFit {
   double log_likelihood = 0.0;
   double deviance = 0.0;  // against the saturated model
   int evaluations = 0;    // of the likelihood, grid included
+  // Other maxima the fit reached from other starts whose log-likelihood is
+  // within kEquallyLikely of the best: a flat ridge (few trials, or data that
+  // separate perfectly) where the data do not pick one function.
+  std::vector<PsychometricParams> equally_likely{};
+  // Set when the likelihood keeps rising toward an infinitely steep step
+  // (responses that separate perfectly): the step may then sit anywhere
+  // between these two tested levels at no cost in likelihood.
+  std::optional<std::pair<double, double>> step_between{};
 };
+
+// Log-likelihood difference below which two solutions count as equally likely
+// (a likelihood-ratio chi-square of 0.02: no data could tell them apart).
+inline constexpr double kEquallyLikely = 0.01;
+
+struct UniquenessCheck {
+  bool unique = true;
+  double threshold_min = 0.0, threshold_max = 0.0;  // over the equally likely solutions
+  std::string message;                              // empty when unique
+};
+// Whether the fit's maximum pins down the threshold at `proportion`: not
+// unique when equally likely solutions put it more than 3 % of the tested
+// range apart (by how much more the search may understate: a flat ridge has
+// no ends it could find). The message names the spread and what to do.
+UniquenessCheck check_unique_maximum(const PsychometricFit& fit, const std::vector<StimulusLevel>& data,
+                                     double proportion);
 
 // Sum over levels of k log psi + (n - k) log(1 - psi).
 double log_likelihood(PsychometricModel model, const PsychometricParams& p, const std::vector<StimulusLevel>& data);
@@ -84,10 +115,11 @@ double log_likelihood(PsychometricModel model, const PsychometricParams& p, cons
 double deviance(PsychometricModel model, const PsychometricParams& p, const std::vector<StimulusLevel>& data);
 
 // Maximum likelihood: a grid search over (alpha, beta[, lambda]) picks the
-// start, then a Nelder-Mead simplex (restarted until it stops improving)
-// polishes it.
+// starts (the best point, and the extremes of the points nearly as good), a
+// bounded Newton method with analytic derivatives polishes each, and the best
+// wins; the others that are equally likely go to `equally_likely`.
 Result<PsychometricFit> fit_psychometric(const std::vector<StimulusLevel>& data, const FitOptions& options);
-// The same, polishing from a given start without the grid (bootstrap refits).
+// The same, polishing from a given start without the grid.
 Result<PsychometricFit> fit_psychometric_from(const std::vector<StimulusLevel>& data, const FitOptions& options,
                                               const PsychometricParams& start);
 
@@ -98,8 +130,13 @@ struct GoodnessOfFit {
   double p_value = 1.0;
   int simulations = 0;
 };
+// Simulated data set i comes from Rng(mix_seed(seed, i)) and is refitted from
+// its own grid start, exactly as bootstrap_psychometric's replica i with the
+// same seed, so a bootstrap's result carries this test for free. `threads`:
+// 0 uses every core; the result does not depend on it.
 Result<GoodnessOfFit> goodness_of_fit(const std::vector<StimulusLevel>& data, const FitOptions& options,
-                                      const PsychometricFit& fit, int simulations, std::uint64_t seed);
+                                      const PsychometricFit& fit, int simulations, std::uint64_t seed,
+                                      int threads = 0);
 
 struct ConfidenceInterval {
   double lower = 0.0;
@@ -112,6 +149,7 @@ struct BootstrapOptions {
   double coverage = 0.95;         // two-sided
   double threshold_proportion = 0.75;
   bool bca = true;                // BCa needs 2 refits per level for the jackknife
+  int threads = 0;                // 0: every core; the result does not depend on it
 };
 
 struct BootstrapEstimate {
@@ -119,18 +157,26 @@ struct BootstrapEstimate {
   double standard_error = 0.0;    // SD of the bootstrap distribution
   ConfidenceInterval percentile;
   ConfidenceInterval bca;         // NaN bounds when BCa is off or undefined
+  double bias_correction = 0.0;   // BCa's z0 (NaN when undefined)
+  double acceleration = 0.0;      // BCa's a from the jackknife (NaN when BCa is off)
 };
 
 struct BootstrapResult {
   int samples = 0;
   int failed_fits = 0;            // simulated sets whose threshold did not exist
+  // Refits steeper than any start on the grid (beta > 20 for the Weibull,
+  // > 200 / tested range otherwise): simulated data that separate perfectly.
+  int steep_refits = 0;
+  GoodnessOfFit goodness_of_fit;  // from the same simulated data sets
   double coverage = 0.95;
   double threshold_proportion = 0.75;
   BootstrapEstimate alpha, beta, lambda, threshold, slope;
 };
 
 // Parametric bootstrap: simulate binomial data from the fit at the observed
-// levels and trial counts, refit, and read intervals off the distribution.
+// levels and trial counts, refit each from its own grid start (never from the
+// fit, which would pin every refit to it on a flat likelihood), and read
+// intervals off the distribution.
 Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>& data, const FitOptions& options,
                                                const PsychometricFit& fit, const BootstrapOptions& bootstrap);
 
@@ -142,6 +188,11 @@ Result<double> interpolated_threshold(const std::vector<StimulusLevel>& data, do
 
 // Pools equal levels and sorts by level.
 std::vector<StimulusLevel> pool_levels(std::vector<StimulusLevel> data);
+
+// BCa's acceleration from jackknife values theta_(i) with weights w_i (how
+// many deletions give that value): sum w d^3 / (6 (sum w d^2)^1.5), d = mean -
+// theta_(i) (Efron & Tibshirani 1993, eq. 14.15). 0 when the values are equal.
+double jackknife_acceleration(const std::vector<double>& values, const std::vector<double>& weights);
 
 // Quantile with linear interpolation between order statistics (R type 7,
 // numpy's default); `sorted` must be sorted ascending and non-empty.

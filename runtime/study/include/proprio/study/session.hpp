@@ -31,6 +31,39 @@
 
 namespace proprio::study {
 
+// Keeps other processes off a study folder while it lives: an exclusive
+// FolderLock on <dir>/.lock (proprio/core/file_io.hpp), taken before anything
+// in the folder is created, deleted or appended, and released when the last
+// holder in this process goes away (or the process dies). Within one process
+// the hold is shared, because one study runs several sessions in parallel
+// (one per simulated participant) in the same folder. Session::open takes
+// one; take one yourself to cover work around the sessions (deleting old
+// sessions for --force, writing a report).
+class StudyFolderLock {
+ public:
+  // Creates `dir` if missing. Errc::unavailable when another process holds it.
+  static Result<StudyFolderLock> acquire(const std::filesystem::path& dir);
+
+  StudyFolderLock() = default;
+  StudyFolderLock(StudyFolderLock&& other) noexcept;
+  StudyFolderLock& operator=(StudyFolderLock&& other) noexcept;
+  StudyFolderLock(const StudyFolderLock&) = delete;
+  StudyFolderLock& operator=(const StudyFolderLock&) = delete;
+  ~StudyFolderLock();
+
+  bool held() const noexcept { return id_ != 0; }
+
+ private:
+  friend class Session;
+  void release() noexcept;
+  std::uint64_t id_ = 0;  // the folder's entry in this process's table of held folders
+};
+
+// Errc::unavailable when a study is being run in `dir` by another process
+// (its lock is held); success when none is, or when this process holds it.
+// Creates nothing: for readers of a study folder.
+Status check_study_folder_not_in_use(const std::filesystem::path& dir);
+
 struct SessionOptions {
   std::filesystem::path out_dir;   // created if missing
   std::string participant;         // id: letters, digits, '_' and '-' ("P07")
@@ -86,6 +119,15 @@ class Session {
   bool resumed() const;
   int recovered_trials() const;    // rows found when the session was opened
   bool repaired_torn_row() const;  // a half-written last row (crash mid-write) was cut off on resume
+  // The trials found on disk when the session was opened, in order, with the
+  // responses recorded for them (response_time_s and extra as written). A
+  // simulated participant replays them to be in the state it was in when
+  // the earlier run stopped.
+  struct RecordedTrial {
+    Trial trial;
+    Response response;
+  };
+  const std::vector<RecordedTrial>& recovered_trial_list() const;
   std::uint64_t participant_seed() const;
   const std::filesystem::path& csv_path() const;
   const std::filesystem::path& sidecar_path() const;

@@ -43,7 +43,8 @@ struct SimulatedParticipant {
   double true_max_allowable_error_cm = 0;
   int trials_run = 0;        // in this run
   int trials_recovered = 0;  // found on disk (resumed)
-  int haptic_answers = 0;    // answers in haptic conditions (this run)
+  // Over all of the session's trials (a resumed run replays the recorded ones).
+  int haptic_answers = 0;    // answers in haptic conditions
   int correct_attributions = 0;  // of those, the felt force attributed to the haptic sphere
   double peak_device_force_n = 0;
   std::filesystem::path csv;

@@ -1,0 +1,62 @@
+"""Hostile inputs for `proprio psychometric fit` (issues 23 and 24): counts that
+would wrap an int, option values out of range, a threshold the function never
+reaches, and data whose likelihood has no unique maximum."""
+from hostile import case
+
+GOOD = "level,correct,trials\n1,5,10\n2,6,10\n3,9,10\n4,10,10\n"
+SEPARATED = "level,correct,trials\n1,5,10\n2,5,10\n3,10,10\n4,10,10\n"
+
+
+@case("23.14 counts beyond 2^32 are refused with the file and line, not wrapped")
+def _(t):
+    t.write("big.csv", "level,correct,trials\n1,5,10\n2,4294967326,4294967336\n")
+    r = t.run("psychometric", "fit", "--data", "big.csv").fails_cleanly(r"big\.csv:3: 4294967336 trials .*1000000000")
+    assert "30 of 40" not in r.out, "the counts were wrapped"
+
+
+@case("23.14 counts that sum beyond the limit over rows are refused too")
+def _(t):
+    rows = "".join(f"2,{600000000},{600000000}\n" for _ in range(2))
+    t.write("sum.csv", "level,correct,trials\n1,5,10\n" + rows)
+    t.run("psychometric", "fit", "--data", "sum.csv").fails_cleanly(r"sum\.csv:4: .*in all up to this row")
+
+
+@case("24 --bootstrap -3 is refused with a range")
+def _(t):
+    t.write("d.csv", GOOD)
+    for v in ("-3", "5", "1000001"):
+        t.run("psychometric", "fit", "--data", "d.csv", "--bootstrap", v).fails_cleanly(
+            rf"--bootstrap {v}: give 0 \(no bootstrap\) or from 10 to 1000000")
+
+
+@case("24 --gof -1 is refused with a range")
+def _(t):
+    t.write("d.csv", GOOD)
+    t.run("psychometric", "fit", "--data", "d.csv", "--gof", "-1").fails_cleanly(r"--gof -1: give 0 .* from 1 to")
+
+
+@case("24 --threshold below the guess rate names the file")
+def _(t):
+    t.write("d.csv", GOOD)
+    t.run("psychometric", "fit", "--data", "d.csv", "--threshold", "0.4").fails_cleanly(
+        r"d\.csv \(--threshold 0\.4\): the function never reaches proportion 0\.4")
+
+
+@case("24 perfectly separated data warn that the maximum is not unique, and the CI has width")
+def _(t):
+    t.write("sep.csv", SEPARATED)
+    r = t.run("psychometric", "fit", "--data", "sep.csv", "--bootstrap", "200", "--json").expect(
+        rc=0, err=r"sep\.csv: the maximum likelihood is not unique: .*between levels 2 and 3")
+    import json
+    j = json.loads(r.out)
+    assert j["unique_maximum"] is False, j
+    lo, hi = j["bootstrap"]["threshold"]["percentile"]
+    assert hi - lo > 0.3, f"bootstrap interval [{lo}, {hi}] has collapsed"
+
+
+@case("24 well-behaved data give no warning")
+def _(t):
+    t.write("pal.csv", "level,correct,trials\n0.01,59,100\n0.03,53,100\n0.05,68,100\n0.07,83,100\n"
+            "0.09,92,100\n0.11,99,100\n")
+    t.run("psychometric", "fit", "--data", "pal.csv", "--bootstrap", "100", "--gof", "100").expect(
+        rc=0, out=r"goodness of fit p = ", no_err=r"warning")

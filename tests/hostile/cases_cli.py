@@ -288,3 +288,18 @@ def _(t):
           timeout=60).fails_cleanly(r"FIFO")
     cal = t.fifo("stereo.yaml")
     t.run("track", "vist", "--live", "--calibration", cal, "--seconds", "1", timeout=60).expect(rc=1, err=r"FIFO")
+
+
+@case("layer install --force replaces a different manifest it had to read first")
+def _(t):
+    env = {"XDG_DATA_HOME": str(t.path("data")), "HOME": str(t.path("home"))}
+    t.run("layer", "install", "--user", env=env).expect(rc=0)
+    manifests = list(t.path("data").rglob("*.json"))
+    assert len(manifests) == 1, manifests
+    manifests[0].write_text('{"file_format_version": "1.0.0", "api_layer": {"name": "other", "library_path": "x.so"}}')
+    t.watch(manifests[0])
+    t.run("layer", "install", "--user", env=env).fails_cleanly(r"already exists.*--force")
+    t.unchanged()
+    t._hashes.clear()
+    t.run("layer", "install", "--user", "--force", env=env).expect(rc=0, out=r"Installed")
+    assert "XR_APILAYER_PROPRIO" in manifests[0].read_text()

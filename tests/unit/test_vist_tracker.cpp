@@ -139,6 +139,18 @@ TEST_F(VistTrackerInput, AnIsolatedFarFutureStampCostsOneSample) {
   EXPECT_EQ(s.imu_rejected_time_jump, 1u);
 }
 
+// The same when the bad stamp is an IMU's very first sample.
+TEST_F(VistTrackerInput, AFarFutureFirstStampCostsOneSample) {
+  auto& t = *tracker_;
+  constexpr TimeNs kStep = 10'000'000;
+  t.add_imu(sample(1'700'000'000'000'000'000, 0));
+  for (TimeNs i = 1; i <= 10; ++i) t.add_imu(sample(i * kStep, 0));
+  const auto& s = t.stats();
+  EXPECT_EQ(s.imu_rejected_time_jump, 1u);
+  EXPECT_EQ(s.imu_rejected_out_of_order, 0u);
+  EXPECT_EQ(t.newest_imu_time_ns(), 10 * kStep);
+}
+
 TEST_F(VistTrackerInput, CountsDuplicateFramesAndWaitsForImuBeforeAcquiring) {
   auto& t = *tracker_;
   MarkerObservations left, right;

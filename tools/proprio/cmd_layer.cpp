@@ -253,6 +253,8 @@ int run_install(const InstallArgs& a) {
     }
   }
   if (!unchanged) {
+    // The old manifest was read above only to compare it with the new one.
+    forget_input_file(target);
     if (auto s = write_file_atomically(target, text, scope); !s) return logger().error("{}", s.error().message), 1;
   }
   std::printf("%s %s layer manifest %s%s\n  -> %s\n", unchanged ? "Already installed:" : "Installed", to_string(kind),

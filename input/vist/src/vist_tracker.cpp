@@ -171,12 +171,10 @@ bool VistTracker::add_imu(const TimedImuSample& s) {
     ++stats_.imu_rejected_saturated;
     return false;
   }
+  // Even an IMU's first sample waits for its second (one sample of latency at
+  // start): a far-future first stamp would otherwise make every later sample
+  // look out of order and stop the fusion for good.
   TimestampGuard& guard = imu_time_guards_[ks];
-  if (!guard.last_accepted_ns() && !guard.holding()) {
-    // An IMU's first sample is taken as it comes: the tracker cannot wait.
-    guard.reset(s.time_ns);
-    return accept_imu(ks, s);
-  }
   const TimestampGuard::Step step = guard.check(s.time_ns);
   bool fresh = false;
   if (step.reject_held) ++stats_.imu_rejected_time_jump;

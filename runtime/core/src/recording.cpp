@@ -718,6 +718,7 @@ struct RecordingReader::Impl {
   RecordingSummary summary;
   std::vector<std::uint8_t> buf;
   std::vector<std::uint8_t> scan;  // resynchronisation window
+  std::vector<std::uint8_t> crc_chunk;  // candidate records are CRC-checked through this, chunk by chunk
   bool done = false;
   std::uint64_t file_pos = 0;      // where the FILE* stands; reads are sequential except after damage or seek()
   std::uint64_t last_record = 0;   // offset of the record next() returned last
@@ -736,11 +737,11 @@ struct RecordingReader::Impl {
     return true;
   }
 
-  // A record header the writer could have written, with room for its record
-  // before the end of the file: cheap filters before a CRC is computed.
-  bool plausible_header(const std::uint8_t* h, std::uint64_t room) const {
+  // A record header the writer could have written (length, type, stream):
+  // cheap filters before a CRC is computed.
+  static bool header_shape_ok(const std::uint8_t* h) {
     const auto len = static_cast<std::uint32_t>(load_le<4>(h));
-    if (len > kRecordingMaxPayloadBytes || kRecordHeaderBytes + len + kRecordCrcBytes > room || h[5] != 0) return false;
+    if (len > kRecordingMaxPayloadBytes || h[5] != 0) return false;
     const auto stream = static_cast<StreamId>(load_le<2>(h + 6));
     switch (static_cast<RecordType>(h[4])) {
       case RecordType::stream_def: return load_le<8>(h + 8) == 0 && stream != kFileLevelStream;
@@ -749,19 +750,57 @@ struct RecordingReader::Impl {
     }
     return false;
   }
-
-  bool intact_record_at(std::uint64_t offset, const std::uint8_t* h) {
+  // The same, with room for its record before the end of the file.
+  static bool plausible_header(const std::uint8_t* h, std::uint64_t room) {
     const auto len = static_cast<std::uint32_t>(load_le<4>(h));
-    std::vector<std::uint8_t> rec(kRecordHeaderBytes + len + kRecordCrcBytes);
-    if (!read(offset, rec.data(), rec.size())) return false;
-    const std::uint32_t computed = crc32_ieee(std::span(rec).first(kRecordHeaderBytes + len));
-    return computed == static_cast<std::uint32_t>(load_le<4>(rec.data() + kRecordHeaderBytes + len));
+    return header_shape_ok(h) && kRecordHeaderBytes + len + kRecordCrcBytes <= room;
   }
 
-  // The offset of the next intact record after a damaged one at `from`, if any.
+  std::uint64_t resync_budget() const {
+    return kRecordingResyncBudgetFileSizes * size + kRecordingResyncBudgetExtraBytes;
+  }
+
+  // Whether a plausible header h at offset starts an intact record. The
+  // record must end the file or be followed by another plausible header
+  // (possibly cut off) before its CRC is checked; the CRC is computed in
+  // chunks through one reused buffer and charged to the resync budget, which
+  // once spent makes every later candidate fail (summary.resync_gave_up).
+  bool intact_record_at(std::uint64_t offset, const std::uint8_t* h) {
+    const auto len = static_cast<std::uint32_t>(load_le<4>(h));
+    const std::uint64_t end = offset + kRecordHeaderBytes + len + kRecordCrcBytes;
+    if (end < size) {
+      std::array<std::uint8_t, kRecordHeaderBytes> after{};
+      const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(after.size(), size - end));
+      if (!read(end, after.data(), n)) return false;
+      if (n == after.size() && !header_shape_ok(after.data())) return false;
+    }
+    const std::uint64_t cost = kRecordHeaderBytes + len;
+    if (summary.resync_gave_up || summary.resync_checked_bytes + cost > resync_budget()) {
+      summary.resync_gave_up = true;
+      return false;
+    }
+    summary.resync_checked_bytes += cost;
+    constexpr std::size_t kChunk = 1 << 16;
+    crc_chunk.resize(kChunk);
+    std::uint32_t crc = crc32_ieee(std::span(h, kRecordHeaderBytes));
+    for (std::uint64_t at = offset + kRecordHeaderBytes, left = len; left > 0;) {
+      const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(kChunk, left));
+      if (!read(at, crc_chunk.data(), n)) return false;
+      crc = crc32_ieee(std::span(crc_chunk).first(n), crc);
+      at += n;
+      left -= n;
+    }
+    std::array<std::uint8_t, kRecordCrcBytes> stored{};
+    if (!read(end - kRecordCrcBytes, stored.data(), stored.size())) return false;
+    return crc == static_cast<std::uint32_t>(load_le<4>(stored.data()));
+  }
+
+  // The offset of the next intact record after a damaged one at `from`, if
+  // any (none also once the resync budget is spent).
   std::optional<std::uint64_t> find_next_record(std::uint64_t from) {
     constexpr std::size_t kWindow = 1 << 16;
     for (std::uint64_t base = from + 1; base + kRecordHeaderBytes + kRecordCrcBytes <= size; base += kWindow) {
+      if (summary.resync_gave_up) return std::nullopt;
       const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(kWindow + kRecordHeaderBytes - 1, size - base));
       scan.resize(n);
       if (!read(base, scan.data(), n)) return std::nullopt;
@@ -769,9 +808,19 @@ struct RecordingReader::Impl {
         if (plausible_header(scan.data() + i, size - base - i) && intact_record_at(base + i, scan.data() + i)) {
           return base + i;
         }
+        if (summary.resync_gave_up) return std::nullopt;
       }
     }
     return std::nullopt;
+  }
+
+  // What finish() says when no intact record follows the damage.
+  std::string no_intact_record() const {
+    const std::string read_so_far = std::to_string(summary.records) + " records were read";
+    if (!summary.resync_gave_up) return "no intact record after the damage; " + read_so_far;
+    return "gave up searching for an intact record after the damage (" +
+           std::to_string(summary.resync_checked_bytes) + " bytes CRC-checked in candidate records, the limit for a " +
+           std::to_string(size) + "-byte file); " + read_so_far;
   }
 
   // Counts the damaged region [start, resume) and goes on at resume.
@@ -944,8 +993,7 @@ struct RecordingReader::Impl {
       // a 1-in-4-billion event), or stop if there is none.
       const auto damaged = [&](const std::string& what) {
         if (skip_damage(start, what)) return true;
-        finish(RecordingEnd::corrupt, "no intact record after the damage; " + std::to_string(summary.records) +
-                                          " records were read");
+        finish(RecordingEnd::corrupt, no_intact_record());
         return false;
       };
       if (len > kRecordingMaxPayloadBytes) {
@@ -961,10 +1009,17 @@ struct RecordingReader::Impl {
         // The writer cut off mid-record, unless an intact record follows: then
         // the length field was damaged.
         if (total > remaining) {
+          const std::string what = record_no() + " " + at(start) + " has payload length " + std::to_string(len) +
+                                   ", beyond the end of the file";
           if (const auto next = find_next_record(start)) {
-            note_damage(start, *next, record_no() + " " + at(start) + " has payload length " + std::to_string(len) +
-                                          ", beyond the end of the file, but intact records follow");
+            note_damage(start, *next, what + ", but intact records follow");
             continue;
+          }
+          // Not known to be a cut-off writer: the search for what follows gave up.
+          if (summary.resync_gave_up) {
+            note_damage(start, size, what);
+            finish(RecordingEnd::corrupt, no_intact_record());
+            break;
           }
         }
         truncated(total);
@@ -1106,11 +1161,18 @@ Status RecordingReader::seek(std::uint64_t record_offset) {
 TimestampGuard::Step TimestampGuard::check(TimeNs t) noexcept {
   Step step;
   if (held_) {
-    held_ = false;
+    DurationNs back = 0;
+    const bool far_back = __builtin_sub_overflow(held_ns_, t, &back) || back > max_jump_ns_;
     if (t > held_ns_) {
+      held_ = false;
       step.release_held = true;
       last_ = held_ns_;
+    } else if (!last_ && !far_back) {
+      // The held sample is the stream's first and this one is a duplicate or
+      // a small step back: this one is out of order, the first stands.
+      return step;
     } else {
+      held_ = false;
       step.reject_held = true;
     }
   }

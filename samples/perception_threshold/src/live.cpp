@@ -104,7 +104,7 @@ void LiveExperiment::force_loop() {
       const auto c = haptics::sphere_on_half_cylinder(protocol_.contact_law(), target.cylinder,
                                                       target.p_centre_in_world, protocol_.fingertip_radius_m,
                                                       target.q_world_tip);
-      if (c.in_contact) desired = c.force;
+      if (c.in_contact) desired = c.on_pad;
     }
     channel_->update(desired, now);
     felt_force_n_.store(channel_->felt().in_tip_frame().norm());

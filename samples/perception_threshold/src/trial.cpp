@@ -60,7 +60,8 @@ haptics::FingertipForce haptic_force(const PerceptionProtocol& protocol, const P
                                                         *view.p_haptic_centre_in_world, protocol.fingertip_radius_m,
                                                         q_world_tip);
   if (penetration_m) *penetration_m = contact.in_contact ? contact.penetration_m : 0.0;
-  return contact.in_contact ? contact.force : haptics::FingertipForce{};
+  // What the device renders is the force as the pad feels it (docs/haptics.md).
+  return contact.in_contact ? contact.on_pad : haptics::FingertipForce{};
 }
 
 }  // namespace proprio::perception

@@ -303,3 +303,13 @@ def _(t):
     t._hashes.clear()
     t.run("layer", "install", "--user", "--force", env=env).expect(rc=0, out=r"Installed")
     assert "XR_APILAYER_PROPRIO" in manifests[0].read_text()
+
+
+@case("23.5 a glTF whose buffer is a FIFO or /dev/zero is refused, no hang, bounded")
+def _(t):
+    t.fifo("buf.bin")
+    for uri in ("buf.bin", "/dev/zero"):
+        t.write("hand.gltf", '{"asset": {"version": "2.0"}, "buffers": [{"uri": "%s", "byteLength": 1000000000}]}'
+                % uri)
+        t.run("run", "half-cylinder", "--headless", "--frames", "1", "--hand-look", "hand.gltf", "--out", "f",
+              timeout=60, max_mb=1536).fails_cleanly(r"FIFO|character device")

@@ -675,14 +675,12 @@ constexpr int kFormatVersion = 1;
 
 Status StereoCalibration::save(const std::filesystem::path& path) const {
   if (auto s = check_output_path(path, "stereo calibration"); !s) return s;
+  const bool yaml = path.extension() != ".json";
+  std::string text;
   try {
-    cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
-    if (!fs.isOpened()) {
-      return make_error(Errc::io_error, "cannot write calibration '" + path.string() +
-                                            "'; check the folder exists and is writable (extension .yaml, .yml "
-                                            "or .json)");
-    }
-    const bool yaml = path.extension() != ".json";
+    // Written to memory, then replaced atomically: a crash never leaves half a calibration.
+    cv::FileStorage fs(yaml ? ".yaml" : ".json", cv::FileStorage::WRITE | cv::FileStorage::MEMORY);
+    if (!fs.isOpened()) return make_error(Errc::io_error, "cannot format calibration '" + path.string() + "'");
     if (yaml) {
       fs.writeComment(
           "Stereo calibration written by 'proprio calibrate stereo' (docs/stereo-camera.md).\n"
@@ -718,11 +716,11 @@ Status StereoCalibration::save(const std::filesystem::path& path) const {
     fs << "skipped" << "[";
     for (const auto& n : skipped) fs << n;
     fs << "]";
-    fs.release();
+    text = fs.releaseAndGetString();
   } catch (const cv::Exception& e) {
     return make_error(Errc::io_error, "writing calibration '" + path.string() + "' failed: " + e.what());
   }
-  return Status::success();
+  return write_file_atomic(path, text, "stereo calibration");
 }
 
 Result<StereoCalibration> StereoCalibration::load(const std::filesystem::path& path) {

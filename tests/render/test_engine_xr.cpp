@@ -11,6 +11,7 @@
 
 #include "proprio/engine/app.hpp"
 #include "proprio/engine/scripted_hands.hpp"
+#include "proprio/engine/xr_vulkan.hpp"
 #include "proprio/render/image.hpp"
 
 namespace proprio::engine {
@@ -123,6 +124,29 @@ TEST(EngineXr, HandsComeFromProprioLayerThroughTheLoader) {
   EXPECT_GE(report->frames_with_hand, report->frames - 5) << report->describe();
 }
 
+// The one rule for a runtime's minimum Vulkan version, shared by the engine's
+// session and `proprio xr-probe`: its major.minor must not exceed the 1.2 the
+// renderer requests. The probe used to refuse 1.2.5 (it compared the patch too)
+// and the engine used to accept 1.3.
+TEST(EngineXrVulkanVersion, AcceptsTheRequestedMinorAtAnyPatchAndOlder) {
+  for (const XrVersion v : {XR_MAKE_VERSION(1, 2, 5), XR_MAKE_VERSION(1, 2, 0), XR_MAKE_VERSION(1, 1, 0),
+                            XR_MAKE_VERSION(1, 0, 0), XR_MAKE_VERSION(0, 9, 0)}) {
+    const Status s = check_xr_vulkan_min_version(v);
+    EXPECT_TRUE(s) << XR_VERSION_MAJOR(v) << "." << XR_VERSION_MINOR(v) << "." << XR_VERSION_PATCH(v) << ": "
+                   << (s ? "" : s.error().message);
+  }
+}
+
+TEST(EngineXrVulkanVersion, RefusesANewerMinimumAndSaysWhatTheRendererRequests) {
+  const Status s = check_xr_vulkan_min_version(XR_MAKE_VERSION(1, 3, 0));
+  ASSERT_FALSE(s);
+  EXPECT_EQ(s.error().code, Errc::unsupported);
+  EXPECT_NE(s.error().message.find("Vulkan 1.3.0 or newer"), std::string::npos) << s.error().message;
+  EXPECT_NE(s.error().message.find("Vulkan 1.2 instance"), std::string::npos) << s.error().message;
+  EXPECT_FALSE(check_xr_vulkan_min_version(XR_MAKE_VERSION(1, 3, 7)));
+  EXPECT_FALSE(check_xr_vulkan_min_version(XR_MAKE_VERSION(2, 0, 0)));
+  EXPECT_FALSE(check_xr_vulkan_min_version(XR_MAKE_VERSION(2, 1, 0)));
+}
+
 }  // namespace
 }  // namespace proprio::engine
-

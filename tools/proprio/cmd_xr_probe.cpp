@@ -12,11 +12,12 @@
 #define XR_USE_TIMESPEC 1
 #include <time.h>
 
-// Set by CMake when proprio::render (Vulkan) is linked: the Vulkan session needs it.
-#ifndef PROPRIO_HAVE_RENDER
-#define PROPRIO_HAVE_RENDER 0
+// Set by CMake when proprio::engine (Vulkan through OpenXR, the renderer's
+// Vulkan context) is linked: the Vulkan session needs it.
+#ifndef PROPRIO_XR_PROBE_VULKAN
+#define PROPRIO_XR_PROBE_VULKAN 0
 #endif
-#if PROPRIO_HAVE_RENDER
+#if PROPRIO_XR_PROBE_VULKAN
 // Before the OpenXR platform header: XR_KHR_vulkan_enable2's structures use Vulkan's types.
 #define XR_USE_GRAPHICS_API_VULKAN 1
 #include <vulkan/vulkan.h>
@@ -43,7 +44,8 @@
 #include "proprio/core/log.hpp"
 #include "proprio/openxr_layer/xr_ext.hpp"
 #include "xr_loader_paths.hpp"
-#if PROPRIO_HAVE_RENDER
+#if PROPRIO_XR_PROBE_VULKAN
+#include "proprio/engine/xr_vulkan.hpp"
 #include "proprio/render/context.hpp"
 #endif
 
@@ -210,7 +212,7 @@ class Probe {
   double run_s_ = 0.0;
   // What a headless session's first failed frame call was, for the fallback message.
   std::string refused_call_;
-#if PROPRIO_HAVE_RENDER
+#if PROPRIO_XR_PROBE_VULKAN
   // The Vulkan session's device side: destroyed after the session, before the instance.
   std::unique_ptr<render::VulkanContext> vulkan_;
   XrGraphicsBindingVulkan2KHR vulkan_binding_{};
@@ -343,68 +345,18 @@ int Probe::create_instance(SessionKind kind) {
   return kExitOk;
 }
 
-#if PROPRIO_HAVE_RENDER
+#if PROPRIO_XR_PROBE_VULKAN
 // XR_KHR_vulkan_enable2: the runtime creates the Vulkan instance and device
-// (adding what it needs), through the hooks of the renderer's Vulkan context.
+// (adding what it needs), through the engine's hooks on the renderer's context.
 int Probe::create_vulkan_binding() {
-  PFN_xrGetVulkanGraphicsRequirements2KHR get_requirements = nullptr;
-  PFN_xrCreateVulkanInstanceKHR create_vk_instance = nullptr;
-  PFN_xrGetVulkanGraphicsDevice2KHR get_vk_device = nullptr;
-  PFN_xrCreateVulkanDeviceKHR create_vk_device = nullptr;
-  if (!load("xrGetVulkanGraphicsRequirements2KHR", get_requirements) ||
-      !load("xrCreateVulkanInstanceKHR", create_vk_instance) ||
-      !load("xrGetVulkanGraphicsDevice2KHR", get_vk_device) || !load("xrCreateVulkanDeviceKHR", create_vk_device)) {
+  render::ContextOptions base;
+  base.app_name = "proprio xr-probe";
+  auto co = engine::xr_vulkan_context_options(instance_, system_, std::move(base));
+  if (!co) {
+    logger().error("the Vulkan graphics binding could not be set up: {}", co.error().message);
     return kExitError;
   }
-  auto requirements = make<XrGraphicsRequirementsVulkan2KHR>(XR_TYPE_GRAPHICS_REQUIREMENTS_VULKAN2_KHR);
-  if (!ok(get_requirements(instance_, system_, &requirements), "xrGetVulkanGraphicsRequirements2KHR")) return kExitError;
-  // The renderer's context asks for Vulkan 1.2.
-  if (requirements.minApiVersionSupported > XR_MAKE_VERSION(1, 2, 0)) {
-    logger().error("the runtime needs Vulkan {}.{} or newer; the probe's Vulkan context is 1.2",
-                   XR_VERSION_MAJOR(requirements.minApiVersionSupported),
-                   XR_VERSION_MINOR(requirements.minApiVersionSupported));
-    return kExitError;
-  }
-  render::ContextOptions co;
-  co.app_name = "proprio xr-probe";
-  co.create_instance = [&](const VkInstanceCreateInfo& info) -> Result<VkInstance> {
-    auto xi = make<XrVulkanInstanceCreateInfoKHR>(XR_TYPE_VULKAN_INSTANCE_CREATE_INFO_KHR);
-    xi.systemId = system_;
-    xi.pfnGetInstanceProcAddr = &vkGetInstanceProcAddr;
-    xi.vulkanCreateInfo = &info;
-    VkInstance instance = VK_NULL_HANDLE;
-    VkResult vr = VK_SUCCESS;
-    if (const XrResult r = create_vk_instance(instance_, &xi, &instance, &vr); XR_FAILED(r)) {
-      return make_error(Errc::io_error, "xrCreateVulkanInstanceKHR failed: " + result_text(r));
-    }
-    if (vr != VK_SUCCESS) return render::vk_error("vkCreateInstance (through OpenXR)", vr);
-    return instance;
-  };
-  co.pick_physical_device = [&](VkInstance instance) -> Result<VkPhysicalDevice> {
-    auto gi = make<XrVulkanGraphicsDeviceGetInfoKHR>(XR_TYPE_VULKAN_GRAPHICS_DEVICE_GET_INFO_KHR);
-    gi.systemId = system_;
-    gi.vulkanInstance = instance;
-    VkPhysicalDevice device = VK_NULL_HANDLE;
-    if (const XrResult r = get_vk_device(instance_, &gi, &device); XR_FAILED(r)) {
-      return make_error(Errc::io_error, "xrGetVulkanGraphicsDevice2KHR failed: " + result_text(r));
-    }
-    return device;
-  };
-  co.create_device = [&](VkPhysicalDevice physical, const VkDeviceCreateInfo& info) -> Result<VkDevice> {
-    auto di = make<XrVulkanDeviceCreateInfoKHR>(XR_TYPE_VULKAN_DEVICE_CREATE_INFO_KHR);
-    di.systemId = system_;
-    di.pfnGetInstanceProcAddr = &vkGetInstanceProcAddr;
-    di.vulkanPhysicalDevice = physical;
-    di.vulkanCreateInfo = &info;
-    VkDevice device = VK_NULL_HANDLE;
-    VkResult vr = VK_SUCCESS;
-    if (const XrResult r = create_vk_device(instance_, &di, &device, &vr); XR_FAILED(r)) {
-      return make_error(Errc::io_error, "xrCreateVulkanDeviceKHR failed: " + result_text(r));
-    }
-    if (vr != VK_SUCCESS) return render::vk_error("vkCreateDevice (through OpenXR)", vr);
-    return device;
-  };
-  auto ctx = render::VulkanContext::create(co);
+  auto ctx = render::VulkanContext::create(*co);
   if (!ctx) {
     logger().error("the Vulkan graphics binding could not be set up: {}", ctx.error().message);
     return kExitError;
@@ -420,8 +372,8 @@ int Probe::create_vulkan_binding() {
 }
 #else
 int Probe::create_vulkan_binding() {
-  logger().error("this build of proprio has no Vulkan renderer (proprio::render), so xr-probe cannot open a Vulkan "
-                 "session");
+  logger().error("this build of proprio has no engine (proprio::engine: Vulkan through OpenXR), so xr-probe cannot "
+                 "open a Vulkan session");
   return kExitError;
 }
 #endif
@@ -446,7 +398,7 @@ int Probe::create_session(SessionKind kind) {
   std::string device;
   if (kind == SessionKind::vulkan) {
     if (int rc = create_vulkan_binding(); rc != kExitOk) return rc;
-#if PROPRIO_HAVE_RENDER
+#if PROPRIO_XR_PROBE_VULKAN
     sci.next = &vulkan_binding_;
     device = " on " + vulkan_->device_name();
 #endif
@@ -653,7 +605,7 @@ void Probe::report_second(double t_s, double window_s, bool print) {
 
 int Probe::run() {
   if (int rc = check_extensions(); rc != kExitOk) return rc;
-  const bool vulkan_usable = has_vulkan_ext_ && PROPRIO_HAVE_RENDER;
+  const bool vulkan_usable = has_vulkan_ext_ && PROPRIO_XR_PROBE_VULKAN;
   if (args_.session == "headless" && !has_headless_ext_) {
     logger().error("--session headless: the runtime does not offer XR_MND_headless");
     return kExitError;
@@ -681,7 +633,10 @@ int Probe::run() {
                   "Vulkan graphics binding, as hello_xr -g Vulkan2 does.\n",
                   refused_call_.c_str());
       std::fflush(stdout);
-      teardown();  // failures are reported; the Vulkan session is what counts
+      // Failures tearing down the refused session are reported, but the Vulkan
+      // session is what counts: its own failures set failed_ again.
+      teardown();
+      failed_ = false;
       kind = kind_ = SessionKind::vulkan;
       rc = create_instance(kind);
       if (rc == kExitOk) rc = create_session(kind);
@@ -860,7 +815,7 @@ bool Probe::teardown() {
     check(xrDestroySession(session_), "xrDestroySession");
     session_ = XR_NULL_HANDLE;
   }
-#if PROPRIO_HAVE_RENDER
+#if PROPRIO_XR_PROBE_VULKAN
   // The app destroys its Vulkan device and instance after the session, before the XrInstance.
   vulkan_.reset();
 #endif

@@ -24,19 +24,10 @@
 #include "app_impl.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/core/xr_interop.hpp"
+#include "proprio/engine/xr_vulkan.hpp"
 
 namespace proprio::engine {
 namespace {
-
-Error xr_error(XrInstance instance, const char* what, XrResult r) {
-  char name[XR_MAX_RESULT_STRING_SIZE] = "";
-  if (instance != XR_NULL_HANDLE) xrResultToString(instance, r, name);
-  const Errc code = (r == XR_ERROR_RUNTIME_UNAVAILABLE || r == XR_ERROR_FORM_FACTOR_UNAVAILABLE ||
-                     r == XR_ERROR_FORM_FACTOR_UNSUPPORTED || r == XR_ERROR_RUNTIME_FAILURE)
-                        ? Errc::unavailable
-                        : Errc::io_error;
-  return make_error(code, fmt::format("{} failed: {} ({})", what, name[0] ? name : "XrResult", static_cast<int>(r)));
-}
 
 bool has_extension(const std::vector<XrExtensionProperties>& exts, const char* name) {
   for (const auto& e : exts) {
@@ -120,77 +111,28 @@ Result<AppReport> App::Impl::run_xr() {
   ici.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
   ici.enabledExtensionCount = static_cast<std::uint32_t>(enabled.size());
   ici.enabledExtensionNames = enabled.data();
-  if (XrResult r = xrCreateInstance(&ici, &xr.instance); XR_FAILED(r)) return xr_error(xr.instance, "xrCreateInstance", r);
+  if (XrResult r = xrCreateInstance(&ici, &xr.instance); XR_FAILED(r)) {
+    return xr_call_error(xr.instance, "xrCreateInstance", r);
+  }
   XrSystemGetInfo sgi{XR_TYPE_SYSTEM_GET_INFO};
   sgi.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
   XrSystemId system = XR_NULL_SYSTEM_ID;
   if (XrResult r = xrGetSystem(xr.instance, &sgi, &system); XR_FAILED(r)) {
-    Error e = xr_error(xr.instance, "xrGetSystem (HMD)", r);
+    Error e = xr_call_error(xr.instance, "xrGetSystem (HMD)", r);
     e.code = Errc::unavailable;
     return e;
   }
 
-  auto get_requirements = load<PFN_xrGetVulkanGraphicsRequirements2KHR>(xr.instance, "xrGetVulkanGraphicsRequirements2KHR");
-  auto create_vk_instance = load<PFN_xrCreateVulkanInstanceKHR>(xr.instance, "xrCreateVulkanInstanceKHR");
-  auto get_vk_device = load<PFN_xrGetVulkanGraphicsDevice2KHR>(xr.instance, "xrGetVulkanGraphicsDevice2KHR");
-  auto create_vk_device = load<PFN_xrCreateVulkanDeviceKHR>(xr.instance, "xrCreateVulkanDeviceKHR");
   auto to_timespec = timespec_ext ? load<PFN_xrConvertTimeToTimespecTimeKHR>(xr.instance, "xrConvertTimeToTimespecTimeKHR")
                                   : nullptr;
-  if (!get_requirements || !create_vk_instance || !get_vk_device || !create_vk_device) {
-    return make_error(Errc::unsupported, "the runtime lists XR_KHR_vulkan_enable2 but lacks its functions");
-  }
-  XrGraphicsRequirementsVulkan2KHR requirements{XR_TYPE_GRAPHICS_REQUIREMENTS_VULKAN2_KHR};
-  if (XrResult r = get_requirements(xr.instance, system, &requirements); XR_FAILED(r)) {
-    return xr_error(xr.instance, "xrGetVulkanGraphicsRequirements2KHR", r);
-  }
-  if (XR_VERSION_MAJOR(requirements.minApiVersionSupported) > 1 ||
-      (XR_VERSION_MAJOR(requirements.minApiVersionSupported) == 1 &&
-       XR_VERSION_MINOR(requirements.minApiVersionSupported) > 3)) {
-    return make_error(Errc::unsupported, "the runtime needs a Vulkan version newer than 1.3");
-  }
 
   // Vulkan through the runtime.
-  render::ContextOptions co;
-  co.device = options.software_renderer ? render::DevicePreference::software : render::DevicePreference::automatic;
-  co.validation = options.validation;
-  co.create_instance = [&](const VkInstanceCreateInfo& info) -> Result<VkInstance> {
-    XrVulkanInstanceCreateInfoKHR xi{XR_TYPE_VULKAN_INSTANCE_CREATE_INFO_KHR};
-    xi.systemId = system;
-    xi.pfnGetInstanceProcAddr = &vkGetInstanceProcAddr;
-    xi.vulkanCreateInfo = &info;
-    VkInstance instance = VK_NULL_HANDLE;
-    VkResult vr = VK_SUCCESS;
-    if (XrResult r = create_vk_instance(xr.instance, &xi, &instance, &vr); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrCreateVulkanInstanceKHR", r);
-    }
-    if (vr != VK_SUCCESS) return render::vk_error("vkCreateInstance (through OpenXR)", vr);
-    return instance;
-  };
-  co.pick_physical_device = [&](VkInstance instance) -> Result<VkPhysicalDevice> {
-    XrVulkanGraphicsDeviceGetInfoKHR gi{XR_TYPE_VULKAN_GRAPHICS_DEVICE_GET_INFO_KHR};
-    gi.systemId = system;
-    gi.vulkanInstance = instance;
-    VkPhysicalDevice device = VK_NULL_HANDLE;
-    if (XrResult r = get_vk_device(xr.instance, &gi, &device); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrGetVulkanGraphicsDevice2KHR", r);
-    }
-    return device;
-  };
-  co.create_device = [&](VkPhysicalDevice physical, const VkDeviceCreateInfo& info) -> Result<VkDevice> {
-    XrVulkanDeviceCreateInfoKHR di{XR_TYPE_VULKAN_DEVICE_CREATE_INFO_KHR};
-    di.systemId = system;
-    di.pfnGetInstanceProcAddr = &vkGetInstanceProcAddr;
-    di.vulkanPhysicalDevice = physical;
-    di.vulkanCreateInfo = &info;
-    VkDevice device = VK_NULL_HANDLE;
-    VkResult vr = VK_SUCCESS;
-    if (XrResult r = create_vk_device(xr.instance, &di, &device, &vr); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrCreateVulkanDeviceKHR", r);
-    }
-    if (vr != VK_SUCCESS) return render::vk_error("vkCreateDevice (through OpenXR)", vr);
-    return device;
-  };
-  auto ctx = render::VulkanContext::create(co);
+  render::ContextOptions base;
+  base.device = options.software_renderer ? render::DevicePreference::software : render::DevicePreference::automatic;
+  base.validation = options.validation;
+  auto co = xr_vulkan_context_options(xr.instance, system, std::move(base));
+  if (!co) return co.error();
+  auto ctx = render::VulkanContext::create(*co);
   if (!ctx) return ctx.error();
   // The session's objects go before the device; the instance after (XrObjects).
   struct SessionGuard {
@@ -218,7 +160,7 @@ Result<AppReport> App::Impl::run_xr() {
   sci.next = &binding;
   sci.systemId = system;
   if (XrResult r = xrCreateSession(xr.instance, &sci, &xr.session); XR_FAILED(r)) {
-    return xr_error(xr.instance, "xrCreateSession", r);
+    return xr_call_error(xr.instance, "xrCreateSession", r);
   }
 
   // STAGE (floor-level, as the scenes are authored) when there is one.
@@ -232,7 +174,7 @@ Result<AppReport> App::Impl::run_xr() {
                                 : XR_REFERENCE_SPACE_TYPE_LOCAL;
   rsci.poseInReferenceSpace.orientation.w = 1.0f;
   if (XrResult r = xrCreateReferenceSpace(xr.session, &rsci, &xr.app_space); XR_FAILED(r)) {
-    return xr_error(xr.instance, "xrCreateReferenceSpace", r);
+    return xr_call_error(xr.instance, "xrCreateReferenceSpace", r);
   }
 
   // One swapchain per eye at the recommended size.
@@ -245,7 +187,7 @@ Result<AppReport> App::Impl::run_xr() {
   if (XrResult r = xrEnumerateViewConfigurationViews(xr.instance, system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 2,
                                                      &view_count, config_views.data());
       XR_FAILED(r)) {
-    return xr_error(xr.instance, "xrEnumerateViewConfigurationViews", r);
+    return xr_call_error(xr.instance, "xrEnumerateViewConfigurationViews", r);
   }
   std::uint32_t format_count = 0;
   xrEnumerateSwapchainFormats(xr.session, 0, &format_count, nullptr);
@@ -269,7 +211,7 @@ Result<AppReport> App::Impl::run_xr() {
     sc.arraySize = 1;
     sc.mipCount = 1;
     if (XrResult r = xrCreateSwapchain(xr.session, &sc, &xr.swapchains[e]); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrCreateSwapchain", r);
+      return xr_call_error(xr.instance, "xrCreateSwapchain", r);
     }
     std::uint32_t image_count = 0;
     xrEnumerateSwapchainImages(xr.swapchains[e], 0, &image_count, nullptr);
@@ -277,7 +219,7 @@ Result<AppReport> App::Impl::run_xr() {
     if (XrResult r = xrEnumerateSwapchainImages(xr.swapchains[e], image_count, &image_count,
                                                 reinterpret_cast<XrSwapchainImageBaseHeader*>(images.data()));
         XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrEnumerateSwapchainImages", r);
+      return xr_call_error(xr.instance, "xrEnumerateSwapchainImages", r);
     }
     std::vector<VkImage> handles;
     for (const auto& i : images) handles.push_back(i.image);
@@ -304,7 +246,7 @@ Result<AppReport> App::Impl::run_xr() {
         hci.hand = h == 0 ? XR_HAND_LEFT_EXT : XR_HAND_RIGHT_EXT;
         hci.handJointSet = XR_HAND_JOINT_SET_DEFAULT_EXT;
         if (XrResult r = create_tracker(xr.session, &hci, &xr.hand_trackers[static_cast<std::size_t>(h)]); XR_FAILED(r)) {
-          return xr_error(xr.instance, "xrCreateHandTrackerEXT", r);
+          return xr_call_error(xr.instance, "xrCreateHandTrackerEXT", r);
         }
       }
     } else {
@@ -342,7 +284,7 @@ Result<AppReport> App::Impl::run_xr() {
           XrSessionBeginInfo bi{XR_TYPE_SESSION_BEGIN_INFO};
           bi.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
           if (XrResult r = xrBeginSession(xr.session, &bi); XR_FAILED(r)) {
-            return xr_error(xr.instance, "xrBeginSession", r);
+            return xr_call_error(xr.instance, "xrBeginSession", r);
           }
           running = true;
         } else if (state == XR_SESSION_STATE_STOPPING) {
@@ -372,10 +314,10 @@ Result<AppReport> App::Impl::run_xr() {
 
     XrFrameState fs{XR_TYPE_FRAME_STATE};
     if (XrResult r = xrWaitFrame(xr.session, nullptr, &fs); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrWaitFrame", r);
+      return xr_call_error(xr.instance, "xrWaitFrame", r);
     }
     if (XrResult r = xrBeginFrame(xr.session, nullptr); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrBeginFrame", r);
+      return xr_call_error(xr.instance, "xrBeginFrame", r);
     }
     const TimeNs t = xr_to_monotonic(fs.predictedDisplayTime);
     if (inputs.before_frame) inputs.before_frame(t);
@@ -434,10 +376,10 @@ Result<AppReport> App::Impl::run_xr() {
         XrSwapchainImageWaitInfo wi{XR_TYPE_SWAPCHAIN_IMAGE_WAIT_INFO};
         wi.timeout = XR_INFINITE_DURATION;
         if (XrResult r = xrAcquireSwapchainImage(xr.swapchains[e], nullptr, &index); XR_FAILED(r)) {
-          return xr_error(xr.instance, "xrAcquireSwapchainImage", r);
+          return xr_call_error(xr.instance, "xrAcquireSwapchainImage", r);
         }
         if (XrResult r = xrWaitSwapchainImage(xr.swapchains[e], &wi); XR_FAILED(r)) {
-          return xr_error(xr.instance, "xrWaitSwapchainImage", r);
+          return xr_call_error(xr.instance, "xrWaitSwapchainImage", r);
         }
         views[e] = {from_xr(xr_views[e].pose), {xr_views[e].fov.angleLeft, xr_views[e].fov.angleRight,
                                                 xr_views[e].fov.angleUp, xr_views[e].fov.angleDown}};
@@ -470,7 +412,7 @@ Result<AppReport> App::Impl::run_xr() {
     fe.layerCount = rendered ? 1 : 0;
     fe.layers = rendered ? layers : nullptr;
     if (XrResult r = xrEndFrame(xr.session, &fe); XR_FAILED(r)) {
-      return xr_error(xr.instance, "xrEndFrame", r);
+      return xr_call_error(xr.instance, "xrEndFrame", r);
     }
     ++frame;
   }

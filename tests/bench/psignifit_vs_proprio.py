@@ -7,9 +7,11 @@ Both fit a 2AFC Weibull with the lapse rate fixed at 0 and read the threshold
 at 75 % correct (psignifit's cut 0.5) from the same data sets: the Palamedes
 and psignifit demo sets and seeded simulated observers (6 levels x 40 trials,
 8 x 20, 5 x 100). Each command runs REPEATS times, the two tools in turn, and
-the report gives per-data-set medians of wall and CPU time (user + system of
-the finished child), the ratio proprio / psignifit, and the same with the
-bootstrap turned off (so "work" = with minus without, start-up excluded).
+the report gives, per data set and tool, the medians of wall and CPU time
+(user + system of the finished child) of the whole command and of the same
+command with the bootstrap turned off ("start"), and "work" = whole - start,
+a difference of the two printed medians so that the table adds up; the ratios
+proprio / psignifit are taken from those same figures.
 
     python3 tests/bench/psignifit_vs_proprio.py build/dev/tools/proprio/proprio [REPEATS]
 """
@@ -71,11 +73,16 @@ def main():
     if not psignifit:
         sys.exit("psignifit is not installed (apt-get install psignifit); nothing was timed")
     work = tempfile.mkdtemp(prefix="psignifit_vs_proprio_")
-    print(f"{SAMPLES} bootstrap samples + goodness of fit, {repeats} runs each, "
-          f"{os.cpu_count()} CPUs; medians in ms")
-    print(f"{'data set':16} {'proprio wall':>12} {'psignifit':>10} {'ratio':>6} | {'proprio cpu':>11} "
-          f"{'psignifit':>10} {'ratio':>6} | {'work wall ratio':>15} {'work cpu ratio':>14}")
+    load_before = open("/proc/loadavg").read().split()[:3]
+    print(f"{time.strftime('%Y-%m-%d %H:%M')}, {SAMPLES} bootstrap samples + goodness of fit, {repeats} runs each, "
+          f"{os.cpu_count()} CPUs, load average before {' '.join(load_before)}; medians in ms")
+    print("whole = the command with the bootstrap and test; start = the same fit with them off; work = whole - start "
+          "(a difference of the two medians printed, so the columns add up); ratio = proprio / psignifit")
+    header = f"{'data set':16} {'tool':9} {'whole wall':>10} {'whole cpu':>9} {'start wall':>10} {'start cpu':>9} " \
+             f"{'work wall':>9} {'work cpu':>8}"
+    print(header)
     ratios = {"wall": [], "cpu": [], "work_wall": [], "work_cpu": []}
+    summary = []
     for name, rows in data_sets().items():
         csv = os.path.join(work, name + ".csv")
         dat = os.path.join(work, name + ".dat")
@@ -106,19 +113,26 @@ def main():
                 times[key].append(timed(commands[key]))
         med = {key: (statistics.median(w for w, _ in v), statistics.median(c for _, c in v))
                for key, v in times.items()}
-        pw, pc = med[("proprio", SAMPLES)]
-        sw, sc = med[("psignifit", SAMPLES)]
-        work_pw, work_pc = pw - med[("proprio", 0)][0], pc - med[("proprio", 0)][1]
-        work_sw, work_sc = sw - med[("psignifit", 0)][0], sc - med[("psignifit", 0)][1]
-        r = {"wall": pw / sw, "cpu": pc / sc, "work_wall": work_pw / work_sw if work_sw > 0 else float("nan"),
-             "work_cpu": work_pc / work_sc if work_sc > 0 else float("nan")}
+        row = {}
+        for tool in ("proprio", "psignifit"):
+            whole_w, whole_c = med[(tool, SAMPLES)]
+            start_w, start_c = med[(tool, 0)]
+            row[tool] = (whole_w, whole_c, start_w, start_c, whole_w - start_w, whole_c - start_c)
+            print(f"{name:16} {tool:9} " + " ".join(f"{1e3 * v:{w}.1f}" for v, w in
+                                                      zip(row[tool], (10, 9, 10, 9, 9, 8))))
+        p, s = row["proprio"], row["psignifit"]
+        r = {"wall": p[0] / s[0], "cpu": p[1] / s[1],
+             "work_wall": p[4] / s[4] if s[4] > 0 else float("nan"),
+             "work_cpu": p[5] / s[5] if s[5] > 0 else float("nan")}
         for k in ratios:
             ratios[k].append(r[k])
-        print(f"{name:16} {1e3 * pw:12.1f} {1e3 * sw:10.1f} {r['wall']:6.2f} | {1e3 * pc:11.1f} {1e3 * sc:10.1f} "
-              f"{r['cpu']:6.2f} | {r['work_wall']:15.2f} {r['work_cpu']:14.2f}")
+        summary.append(f"{name:16} ratio whole wall {r['wall']:.2f}, whole cpu {r['cpu']:.2f}, "
+                       f"work wall {r['work_wall']:.2f}, work cpu {r['work_cpu']:.2f}")
+    print("\n".join(summary))
     print("median ratio proprio / psignifit: whole command wall {:.2f}, cpu {:.2f}; bootstrap + gof work "
           "wall {:.2f}, cpu {:.2f}".format(*(statistics.median(ratios[k]) for k in
                                               ("wall", "cpu", "work_wall", "work_cpu"))))
+    print(f"load average after {' '.join(open('/proc/loadavg').read().split()[:3])}")
     shutil.rmtree(work)
 
 

@@ -1,6 +1,8 @@
 """Hostile inputs for `proprio psychometric fit` (issues 23 and 24): counts that
 would wrap an int, option values out of range, a threshold the function never
 reaches, and data whose likelihood has no unique maximum."""
+import os
+
 from hostile import case
 
 GOOD = "level,correct,trials\n1,5,10\n2,6,10\n3,9,10\n4,10,10\n"
@@ -60,3 +62,26 @@ def _(t):
             "0.09,92,100\n0.11,99,100\n")
     t.run("psychometric", "fit", "--data", "pal.csv", "--bootstrap", "100", "--gof", "100").expect(
         rc=0, out=r"goodness of fit p = ", no_err=r"warning")
+
+
+@case("23 --plot naming the --data file is refused and the CSV is left as it was")
+def _(t):
+    t.write("d.csv", GOOD)
+    t.watch("d.csv")
+    t.run("psychometric", "fit", "--data", "d.csv", "--plot", "d.csv").fails_cleanly(
+        r"refusing to write the plot to .*d\.csv.*input of this command")
+    t.write("link.csv", GOOD)
+    os.symlink("link.csv", t.path("alias.svg"))
+    t.watch("link.csv")
+    t.run("psychometric", "fit", "--data", "link.csv", "--plot", "alias.svg").fails_cleanly(
+        r"refusing to write the plot to .*alias\.svg.*input of this command")
+
+
+@case("24 a bootstrap or test that would simulate more than 2e9 trials is refused at once, not a hang")
+def _(t):
+    t.write("huge.csv", "level,correct,trials\n1,300000000,500000000\n2,450000000,500000000\n")
+    t.run("psychometric", "fit", "--data", "huge.csv", "--bootstrap", "1999", timeout=20).fails_cleanly(
+        r"huge\.csv: a bootstrap of 1999 data sets x 1000000000 trials would simulate 1999000000000 trials, more "
+        r"than the limit of 2000000000; use at most 2 data sets")
+    t.run("psychometric", "fit", "--data", "huge.csv", "--gof", "3", timeout=20).fails_cleanly(
+        r"goodness-of-fit test of 3 data sets .* more than the limit of 2000000000")

@@ -172,7 +172,7 @@ def _(t):
     for opt, val in [("--guess", "1.5"), ("--guess", "-0.1"), ("--lapse", "1"), ("--lapse-max", "-0.5"),
                      ("--threshold", "2"), ("--threshold", "0"), ("--threshold", "0.3")]:
         t.run("study", "analyze", "S", "--bootstrap", "0", opt, val, "--out", "R").fails_cleanly(
-            r"outside|never reached|no range")
+            r"(--guess|--lapse|--lapse-max) .* is outside|--threshold .*never reaches")
         assert not t.path("R").exists(), f"{opt} {val} wrote a report"
     t.run("study", "analyze", "S", "--bootstrap", "0", "--guess", "nan").fails_cleanly(r"not a finite number")
 

@@ -250,6 +250,18 @@ TEST(StudyAnalysis, RefusesOutOfRangeSettings) {
       EXPECT_EQ(a.error().code, Errc::invalid_argument) << a.error().message;
     }
   }
+  // The message names the option that failed: a valid --lapse next to a bad
+  // --lapse-max was reported as "--lapse 0.02".
+  auto max = quick();
+  max.lapse_max = 0.7;  // at or above 1 - guess: nothing left for the function
+  auto a = analyze_study(dir, max);
+  ASSERT_FALSE(a);
+  EXPECT_NE(a.error().message.find("--lapse-max 0.7 is outside"), std::string::npos) << a.error().message;
+  max.lapse = 0.02;
+  a = analyze_study(dir, max);
+  ASSERT_FALSE(a);
+  EXPECT_EQ(a.error().message.find("--lapse 0.02"), std::string::npos) << a.error().message;
+  EXPECT_NE(a.error().message.find("not both"), std::string::npos) << a.error().message;
   EXPECT_TRUE(analyze_study(dir, quick()));
   fs::remove_all(dir);
 }

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "proprio/study/psychometric.hpp"
@@ -203,6 +204,62 @@ TEST(PsychometricFit, RefusesCountsBeyondTheLimit) {
   auto bad = fit_psychometric(too_many, o);
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.error().message.find("1000000000"), std::string::npos) << bad.error().message;
+}
+
+// Issue 24: a replica simulates one draw per trial, so 1999 replicas of 1e9
+// trials would run for hours; both simulations refuse that up front and say
+// how many data sets fit the limit.
+TEST(PsychometricBootstrap, RefusesMoreSimulatedTrialsThanTheLimit) {
+  const std::vector<StimulusLevel> huge = {{1, 300'000'000, 500'000'000}, {2, 450'000'000, 500'000'000}};
+  FitOptions o;
+  auto fit = fit_psychometric(huge, o);
+  ASSERT_TRUE(fit) << fit.error().message;
+  BootstrapOptions b;
+  b.samples = 1999;
+  auto r = bootstrap_psychometric(huge, o, *fit, b);
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().code, Errc::invalid_argument);
+  EXPECT_NE(r.error().message.find("1999000000000 trials, more than the limit of 2000000000"), std::string::npos)
+      << r.error().message;
+  EXPECT_NE(r.error().message.find("at most 2 data sets"), std::string::npos) << r.error().message;
+  auto g = goodness_of_fit(huge, o, *fit, 3, 1);
+  ASSERT_FALSE(g);
+  EXPECT_NE(g.error().message.find("goodness-of-fit test of 3 data sets"), std::string::npos) << g.error().message;
+  // At the limit exactly, the budget lets it through (and refuses nothing a
+  // normal study holds): 2 x 1e9 draws.
+  EXPECT_EQ(2 * std::int64_t{kMaxTrials}, kMaxSimulatedTrials);
+}
+
+TEST(PsychometricOptions, MessagesNameTheOptionThatFailed) {
+  FitOptions o;
+  o.guess = 1.5;
+  EXPECT_NE(validate_fit_options(o).error().message.find("--guess 1.5"), std::string::npos);
+  o.guess = 0.5;
+  o.lapse = 0.02;  // valid, and not in use with a free lapse
+  o.lapse_free = true;
+  o.lapse_max = 0.7;
+  const Status max = validate_fit_options(o);
+  ASSERT_FALSE(max);
+  EXPECT_NE(max.error().message.find("--lapse-max 0.7"), std::string::npos) << max.error().message;
+  o.lapse_free = false;
+  o.lapse = std::nan("");
+  const Status fixed = validate_fit_options(o);
+  ASSERT_FALSE(fixed);
+  EXPECT_NE(fixed.error().message.find("--lapse nan"), std::string::npos) << fixed.error().message;
+  o.lapse = 0.0;
+  EXPECT_TRUE(validate_threshold_proportion(o, 0.75));
+  const Status below = validate_threshold_proportion(o, 0.4);
+  ASSERT_FALSE(below);
+  EXPECT_NE(below.error().message.find("--threshold 0.4: the function never reaches"), std::string::npos)
+      << below.error().message;
+  o.lapse_free = true;
+  o.lapse_max = 0.3;  // the largest lapse the fit may choose tops the function at 0.7
+  EXPECT_FALSE(validate_threshold_proportion(o, 0.75));
+  // The fit uses the same check.
+  o.lapse_max = 0.5;
+  auto fit = fit_psychometric(bootstrap_demo_levels(), o);
+  ASSERT_FALSE(fit);
+  EXPECT_NE(fit.error().message.find("--lapse-max 0.5 is outside"), std::string::npos) << fit.error().message;
 }
 
 }  // namespace

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fmt/format.h>
-#include <fstream>
+#include <sstream>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -270,25 +270,9 @@ Result<StudyAnalysis> analyze_study(const fs::path& dir, const StudyAnalysisOpti
                                                    dir.string()));
   }
   if (Status s = check_study_folder_not_in_use(dir); !s) return s.error();
-  // Refused before any fit: a value out of range would fail every fit and
-  // leave an empty report behind.
-  const auto in = [](const std::optional<double>& v, double lo, double hi) { return !v || (*v >= lo && *v < hi); };
-  if (!in(options.guess, 0.0, 1.0)) {
+  if (options.lapse && options.lapse_max) {
     return make_error(Errc::invalid_argument,
-                      fmt::format("--guess {} is outside [0, 1): 0.5 for 2AFC, 1/m for m-AFC, 0 for yes/no",
-                                  *options.guess));
-  }
-  if (!in(options.lapse, 0.0, 1.0) || !in(options.lapse_max, 0.0, 1.0)) {
-    return make_error(Errc::invalid_argument,
-                      fmt::format("--{} {} is outside [0, 1): lapse rates are small proportions, e.g. 0.02 or 0.06",
-                                  options.lapse ? "lapse" : "lapse-max",
-                                  options.lapse ? *options.lapse : *options.lapse_max));
-  }
-  if (!in(options.threshold, 0.0, 1.0) || (options.threshold && *options.threshold <= 0.0)) {
-    return make_error(Errc::invalid_argument,
-                      fmt::format("--threshold {} is outside (0, 1): it is the proportion correct that defines the "
-                                  "threshold, e.g. 0.75",
-                                  *options.threshold));
+                      "give --lapse (a fixed lapse rate) or --lapse-max (a free one up to that value), not both");
   }
   if (options.bootstrap < 0) {
     return make_error(Errc::invalid_argument, "--bootstrap must be 0 (no intervals) or more samples");
@@ -408,18 +392,11 @@ Result<StudyAnalysis> analyze_study(const fs::path& dir, const StudyAnalysisOpti
     fo.lapse_max = *options.lapse_max;
   }
   if (options.threshold) criterion = *options.threshold;
-  const double top = 1.0 - (fo.lapse_free ? fo.lapse_max : fo.lapse);
-  if (!(fo.guess >= 0.0 && fo.guess < top && top <= 1.0)) {
-    return make_error(Errc::invalid_argument,
-                      fmt::format("guess rate {} and lapse {} leave no range for the function (guess must be below "
-                                  "1 - lapse); check --guess/--lapse/--lapse-max or the sidecar's analysis section",
-                                  fo.guess, 1.0 - top));
-  }
-  if (!(criterion > fo.guess && criterion < top)) {
-    return make_error(Errc::invalid_argument,
-                      fmt::format("threshold proportion {} is never reached by a function that runs from the guess "
-                                  "rate {} to 1 - lapse = {}; choose --threshold between them (e.g. 0.75 for 2AFC)",
-                                  criterion, fo.guess, top));
+  // Refused before any fit: a value out of range would fail every fit and
+  // leave an empty report behind. A value the options did not give comes
+  // from the sidecar.
+  if (Status s = validate_threshold_proportion(fo, criterion); !s) {
+    return s.error().with_context("analysis settings (the options, else the session sidecar's analysis section)");
   }
   a.fit_options = fo;
   a.criterion = criterion;
@@ -642,15 +619,11 @@ Result<std::vector<fs::path>> write_study_report(const StudyAnalysis& a, const f
   }
   std::vector<fs::path> written;
   const fs::path summary = out_dir / "summary.json";
-  {
-    std::ofstream out(summary);
-    out << study_analysis_json(a) << "\n";
-    if (!out) return make_error(Errc::io_error, fmt::format("cannot write {}", summary.string()));
-  }
+  if (Status s = write_file_atomic(summary, study_analysis_json(a) + "\n", "analysis summary"); !s) return s.error();
   written.push_back(summary);
   const fs::path table = out_dir / "thresholds.csv";
   {
-    std::ofstream out(table);
+    std::ostringstream out;
     out << "participant,condition,trials,threshold,ci_lower,ci_upper,bca_lower,bca_upper,interpolated_threshold,"
            "alpha,beta,lambda,deviance\n";
     auto num = [](double v) { return std::isfinite(v) ? fmt::format("{}", v) : std::string(); };
@@ -667,7 +640,7 @@ Result<std::vector<fs::path>> write_study_report(const StudyAnalysis& a, const f
             << (c.fit ? num(c.fit->deviance) : "") << '\n';
       }
     }
-    if (!out) return make_error(Errc::io_error, fmt::format("cannot write {}", table.string()));
+    if (Status s = write_file_atomic(table, out.str(), "thresholds table"); !s) return s.error();
   }
   written.push_back(table);
 

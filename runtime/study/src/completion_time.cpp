@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -398,9 +397,7 @@ Result<std::vector<fs::path>> write_completion_time_report(const CompletionTimeA
   std::vector<fs::path> files;
   const auto write = [&](const fs::path& name, const std::string& text) -> Status {
     const fs::path p = out_dir / name;
-    std::ofstream out(p, std::ios::binary);
-    out << text;
-    if (!out) return make_error(Errc::io_error, fmt::format("cannot write {}", p.string()));
+    if (Status s = write_file_atomic(p, text, "completion-time report"); !s) return s;
     files.push_back(p);
     return {};
   };

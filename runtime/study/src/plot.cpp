@@ -3,8 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fmt/format.h>
-#include <fstream>
 #include <limits>
+
+#include "proprio/core/file_io.hpp"
 
 namespace proprio::study {
 namespace {
@@ -154,15 +155,7 @@ std::string psychometric_svg(const PsychometricPlot& plot) {
 }
 
 Status write_psychometric_svg(const std::filesystem::path& path, const PsychometricPlot& plot) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) {
-    return make_error(Errc::io_error,
-                      fmt::format("cannot write the plot {}: check that the folder exists and is writable",
-                                  path.string()));
-  }
-  out << psychometric_svg(plot);
-  if (!out.flush()) return make_error(Errc::io_error, fmt::format("writing the plot {} failed", path.string()));
-  return Status::success();
+  return write_file_atomic(path, psychometric_svg(plot), "plot");
 }
 
 }  // namespace proprio::study

@@ -29,21 +29,26 @@ double standard_normal_quantile(double p) {
 // k log k/(n p) terms with 0 log 0 = 0.
 double xlogy_ratio(double k, double expected) { return k > 0.0 ? k * std::log(k / expected) : 0.0; }
 
-Status validate_options(const FitOptions& o) {
-  if (!(o.guess >= 0.0 && o.guess < 1.0)) {
-    return make_error(Errc::invalid_argument,
-                      fmt::format("guess rate {} is outside [0, 1): use 0.5 for 2AFC, 1/m for m-AFC, 0 for yes/no", o.guess));
-  }
-  if (o.lapse_free) {
-    if (!(o.lapse_max >= 0.0 && o.lapse_max < 1.0 - o.guess)) {
-      return make_error(Errc::invalid_argument,
-                        fmt::format("maximum lapse rate {} must lie in [0, 1 - guess) (e.g. 0.06)", o.lapse_max));
-    }
-  } else if (!(o.lapse >= 0.0 && o.lapse < 1.0 - o.guess)) {
-    return make_error(Errc::invalid_argument,
-                      fmt::format("lapse rate {} must lie in [0, 1 - guess) (e.g. 0 or 0.02)", o.lapse));
-  }
-  return Status::success();
+// Empty when a function running from `guess` to `top` = 1 - lapse reaches
+// `proportion`; otherwise what is wrong and what to do.
+std::string unreachable_proportion(double proportion, double guess, double top) {
+  if (proportion > guess && proportion < top) return {};
+  return fmt::format("the function never reaches proportion {}: it runs from the guess rate {} to 1 - lapse = {}; "
+                     "choose a --threshold between them (e.g. 0.75 for 2AFC)",
+                     proportion, guess, top);
+}
+
+// Each simulated trial is one draw; see kMaxSimulatedTrials.
+Status check_simulation_budget(const std::vector<StimulusLevel>& data, int replicas, std::string_view what) {
+  std::int64_t trials = 0;
+  for (const StimulusLevel& s : data) trials += std::max(s.trials, 0);
+  const std::int64_t draws = trials * std::max(replicas, 0);  // <= 1e9 * INT_MAX: no overflow
+  if (draws <= kMaxSimulatedTrials) return Status::success();
+  return make_error(Errc::invalid_argument,
+                    fmt::format("a {} of {} data sets x {} trials would simulate {} trials, more than the limit of {}; "
+                                "use at most {} data sets for this file, or fewer trials",
+                                what, replicas, trials, draws, kMaxSimulatedTrials,
+                                trials > 0 ? kMaxSimulatedTrials / trials : 0));
 }
 
 // Levels with trials only.
@@ -601,13 +606,39 @@ double psi(PsychometricModel model, const PsychometricParams& p, double x) {
 Result<double> threshold_at(PsychometricModel model, const PsychometricParams& p, double proportion) {
   const double span = 1.0 - p.gamma - p.lambda;
   const double f = (proportion - p.gamma) / span;
-  if (!(span > 0.0) || !(f > 0.0 && f < 1.0)) {
-    return make_error(Errc::out_of_range,
-                      fmt::format("the function never reaches proportion {}: it runs from the guess rate {} to 1 - "
-                                  "lapse = {}",
-                                  proportion, p.gamma, 1.0 - p.lambda));
+  if (std::string why = unreachable_proportion(proportion, p.gamma, 1.0 - p.lambda); !why.empty()) {
+    return make_error(Errc::out_of_range, std::move(why));
+  }
+  if (!(span > 0.0) || !(f > 0.0 && f < 1.0)) {  // rounding at the very ends
+    return make_error(Errc::out_of_range, fmt::format("the function reaches proportion {} only at its limit", proportion));
   }
   return sigmoid_inverse(model, p.alpha, p.beta, f);
+}
+
+Status validate_fit_options(const FitOptions& o) {
+  if (!(o.guess >= 0.0 && o.guess < 1.0)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("--guess {} is outside [0, 1): use 0.5 for 2AFC, 1/m for m-AFC, 0 for yes/no",
+                                  o.guess));
+  }
+  const double value = o.lapse_free ? o.lapse_max : o.lapse;
+  if (!(value >= 0.0 && value < 1.0 - o.guess)) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("--{} {} is outside [0, 1 - guess) = [0, {}): lapse rates are small proportions, "
+                                  "e.g. {}",
+                                  o.lapse_free ? "lapse-max" : "lapse", value, 1.0 - o.guess,
+                                  o.lapse_free ? "0.06" : "0 or 0.02"));
+  }
+  return Status::success();
+}
+
+Status validate_threshold_proportion(const FitOptions& o, double proportion) {
+  if (Status s = validate_fit_options(o); !s) return s;
+  const double top = 1.0 - (o.lapse_free ? o.lapse_max : o.lapse);
+  if (std::string why = unreachable_proportion(proportion, o.guess, top); !why.empty()) {
+    return make_error(Errc::invalid_argument, fmt::format("--threshold {}: {}", proportion, why));
+  }
+  return Status::success();
 }
 
 double slope_at(PsychometricModel model, const PsychometricParams& p, double x) {
@@ -690,7 +721,7 @@ PsychometricFit make_fit(const Likelihood& lk, const Solution& s, int evaluation
 }  // namespace
 
 Result<PsychometricFit> fit_psychometric(const std::vector<StimulusLevel>& raw, const FitOptions& options) {
-  if (Status s = validate_options(options); !s) return s.error();
+  if (Status s = validate_fit_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
   const Likelihood lk(used_levels(raw), options);
   const StartGrid grid(lk, 40, 30, grid_lambdas(options, 4));
@@ -758,7 +789,7 @@ Result<PsychometricFit> fit_psychometric(const std::vector<StimulusLevel>& raw, 
 
 Result<PsychometricFit> fit_psychometric_from(const std::vector<StimulusLevel>& raw, const FitOptions& options,
                                               const PsychometricParams& start) {
-  if (Status s = validate_options(options); !s) return s.error();
+  if (Status s = validate_fit_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
   if (!(start.beta > 0.0) || (options.model == PsychometricModel::weibull && !(start.alpha > 0.0)) ||
       !std::isfinite(start.alpha) || !std::isfinite(start.beta)) {
@@ -897,8 +928,9 @@ GoodnessOfFit goodness_from(const std::vector<Replica>& replicas, double observe
 Result<GoodnessOfFit> goodness_of_fit(const std::vector<StimulusLevel>& raw, const FitOptions& options,
                                       const PsychometricFit& fit, int simulations, std::uint64_t seed, int threads) {
   if (simulations < 1) return make_error(Errc::invalid_argument, "goodness of fit needs at least one simulation");
-  if (Status s = validate_options(options); !s) return s.error();
+  if (Status s = validate_fit_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
+  if (Status s = check_simulation_budget(raw, simulations, "goodness-of-fit test"); !s) return s.error();
   const Likelihood lk(used_levels(raw), options);
   const std::vector<Replica> replicas = simulate_replicas(lk, fit, simulations, seed, threads, 0.5);
   GoodnessOfFit g = goodness_from(replicas, lk.deviance(lk.theta(fit.params)));
@@ -943,8 +975,9 @@ Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>&
     return make_error(Errc::invalid_argument,
                       fmt::format("confidence level {} must lie in (0, 1), e.g. 0.95", bootstrap.coverage));
   }
-  if (Status s = validate_options(options); !s) return s.error();
+  if (Status s = validate_fit_options(options); !s) return s.error();
   if (Status s = validate_levels(options.model, raw); !s) return s.error();
+  if (Status s = check_simulation_budget(raw, bootstrap.samples, "bootstrap"); !s) return s.error();
   const std::vector<StimulusLevel> data = used_levels(raw);
   std::array<double, kStats> observed{};
   if (!statistics_of(fit, bootstrap.threshold_proportion, observed)) {

@@ -3,11 +3,11 @@
 #include <fmt/format.h>
 
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "proprio/core/file_io.hpp"
 #include "proprio/study/csv.hpp"
 #include "proprio/study/plot.hpp"
 
@@ -222,9 +222,7 @@ Result<std::vector<fs::path>> write_perception_report(const PerceptionReport& r,
   written->push_back(choice);
 
   const fs::path md = out_dir / "summary.md";
-  std::ofstream f(md);
-  f << r.summary_markdown;
-  if (!f) return make_error(Errc::io_error, "cannot write " + md.string());
+  if (Status s = write_file_atomic(md, r.summary_markdown, "summary"); !s) return s.error();
   written->push_back(md);
 
   nlohmann::json j;
@@ -236,9 +234,7 @@ Result<std::vector<fs::path>> write_perception_report(const PerceptionReport& r,
   j["max_allowable_error_cm"] = num(r.max_allowable_error_cm);
   for (const auto& [p, v] : r.max_allowable_error_by_participant) j["max_allowable_error_by_participant_cm"][p] = num(v);
   const fs::path thesis = out_dir / "thesis_summary.json";
-  std::ofstream jf(thesis);
-  jf << j.dump(2) << "\n";
-  if (!jf) return make_error(Errc::io_error, "cannot write " + thesis.string());
+  if (Status s = write_file_atomic(thesis, j.dump(2) + "\n", "thesis summary"); !s) return s.error();
   written->push_back(thesis);
   return written;
 }

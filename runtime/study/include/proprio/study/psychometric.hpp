@@ -53,8 +53,14 @@ Result<double> threshold_at(PsychometricModel model, const PsychometricParams& p
 double slope_at(PsychometricModel model, const PsychometricParams& p, double x);
 
 // The most trials one level may hold (and the most a data file may hold in
-// all): counts are ints, and a bootstrap simulates every trial.
+// all): counts are ints.
 inline constexpr int kMaxTrials = 1'000'000'000;
+
+// The most binomial draws one bootstrap or goodness-of-fit test may simulate
+// (replicas x trials in all): each simulated trial is one random draw, so this
+// bounds the run (1e9 draws took 6.5 s of CPU on the 2-vCPU development VM);
+// more is refused up front rather than left to look like a hang.
+inline constexpr std::int64_t kMaxSimulatedTrials = 2'000'000'000;
 
 // One stimulus level: how many of how many trials were correct.
 struct StimulusLevel {
@@ -75,6 +81,15 @@ struct FitOptions {
   double lapse = 0.0;          // the fixed lambda
   double lapse_max = 0.06;     // free lambda lies in [0, lapse_max]
 };
+
+// Checks fit options: the guess rate in [0, 1) and the fixed lapse rate (for
+// a free lapse, its maximum) in [0, 1 - guess). Messages name the option that
+// holds the bad value as the CLI spells it (--guess, --lapse, --lapse-max).
+Status validate_fit_options(const FitOptions& options);
+// Checks that a function under `options` reaches `proportion` (the criterion
+// that defines the threshold, --threshold): it must lie in (guess, 1 - lapse),
+// with the largest lapse a free fit may choose.
+Status validate_threshold_proportion(const FitOptions& options, double proportion);
 
 struct PsychometricFit {
   PsychometricModel model = PsychometricModel::weibull;

@@ -55,6 +55,11 @@ void check(std::span<const std::uint8_t> bytes) {
   if (s.end == RecordingEnd::reading || s.valid_bytes + s.ignored_bytes != bytes.size()) std::abort();
   if (s.skipped_bytes > s.ignored_bytes || (s.corrupt_regions > 0) != (s.skipped_bytes > 0)) std::abort();
   if (s.corrupt_regions > 0 && s.end != RecordingEnd::corrupt) std::abort();
+  // Resynchronisation work stays within its budget, and giving up is corruption.
+  if (s.resync_checked_bytes > kRecordingResyncBudgetFileSizes * bytes.size() + kRecordingResyncBudgetExtraBytes) {
+    std::abort();
+  }
+  if (s.resync_gave_up && s.end != RecordingEnd::corrupt) std::abort();
   auto after = reader->next();
   if (!after || *after) std::abort();  // the end is sticky
 }

@@ -578,6 +578,60 @@ TEST(Recording, DamageRunningToTheEndIsCorruptAndCounted) {
   EXPECT_EQ(back.summary.valid_bytes + back.summary.ignored_bytes, file.size());
 }
 
+// A crafted tail of back-to-back plausible record headers, each claiming a
+// ~1 MiB payload that ends on another plausible header: every 16-byte step is a
+// candidate worth a 1 MiB CRC, ~200 000 of them, which used to take hours. The
+// search is bounded and gives up, saying so.
+TEST(Recording, ResyncOverCraftedPlausibleHeadersGivesUpWithinItsBudget) {
+  TempDir dir;
+  const Session s = pose_session(6);
+  Bytes file = session_bytes(dir / "c.prec", s);
+  const std::vector<std::uint64_t> ends = record_ends(file);
+  file.resize(ends[4]);
+  file[ends[3] + 30] ^= 0xFF;  // record #4 fails its CRC: the search starts there
+  constexpr std::uint32_t kLen = (1u << 20) - 20;  // header + payload + CRC = 1 MiB: the next header lines up
+  static_assert((16 + kLen + 4) % 16 == 0);
+  const std::uint8_t fake[16] = {static_cast<std::uint8_t>(kLen), static_cast<std::uint8_t>(kLen >> 8),
+                                 static_cast<std::uint8_t>(kLen >> 16), static_cast<std::uint8_t>(kLen >> 24),
+                                 2, 0, 7, 0,  // data record, stream 7
+                                 0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77, 0x08};
+  while (file.size() < ends[4] + (4u << 20)) file.insert(file.end(), std::begin(fake), std::end(fake));
+
+  const ReadBack back = read_all(file);
+  EXPECT_EQ(back.records.size(), 2u);  // the poses before the damaged one
+  EXPECT_EQ(back.summary.end, RecordingEnd::corrupt);
+  EXPECT_TRUE(back.summary.resync_gave_up);
+  EXPECT_NE(back.summary.detail.find("gave up searching"), std::string::npos) << back.summary.detail;
+  // The work done is bounded by the budget, not by (candidates x record length).
+  const std::uint64_t budget = kRecordingResyncBudgetFileSizes * file.size() + kRecordingResyncBudgetExtraBytes;
+  EXPECT_LE(back.summary.resync_checked_bytes, budget);
+  EXPECT_GT(back.summary.resync_checked_bytes, budget - (1u << 20)) << "the search went on until the budget";
+  EXPECT_EQ(back.summary.valid_bytes + back.summary.ignored_bytes, file.size());
+}
+
+// A plausible header is CRC-checked only when its record ends the file or is
+// followed by another plausible header: junk claiming long payloads costs no CRC.
+TEST(Recording, ResyncSkipsCandidatesNotFollowedByARecord) {
+  TempDir dir;
+  const Session s = pose_session(8);
+  const Bytes good = session_bytes(dir / "j.prec", s);
+  const std::vector<std::uint64_t> ends = record_ends(good);
+  Bytes file(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(ends[3]));
+  // Junk: headers claiming 1000-byte payloads followed by zeros, then the rest.
+  const std::uint8_t fake[16] = {0xE8, 0x03, 0, 0, 2, 0, 7, 0, 1, 2, 3, 4, 5, 6, 7, 8};
+  for (int i = 0; i < 200; ++i) file.insert(file.end(), std::begin(fake), std::end(fake));
+  file.insert(file.end(), 1024, 0);
+  file.insert(file.end(), good.begin() + static_cast<std::ptrdiff_t>(ends[3]), good.end());
+
+  const ReadBack back = read_all(file);
+  EXPECT_EQ(back.records.size(), 8u);
+  EXPECT_EQ(back.summary.end, RecordingEnd::corrupt);
+  EXPECT_EQ(back.summary.corrupt_regions, 1u);
+  EXPECT_FALSE(back.summary.resync_gave_up);
+  // Only the real record after the junk was CRC-checked (one pose record).
+  EXPECT_EQ(back.summary.resync_checked_bytes, ends[4] - ends[3] - 4);
+}
+
 TEST(Recording, SeekGoesBackToARecordReadBefore) {
   TempDir dir;
   const Session s = pose_session(6);

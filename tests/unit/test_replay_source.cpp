@@ -270,6 +270,7 @@ TEST(ReplayHandSource, StreamsALongRecordingInBoundedMemoryWithTheSameAnswers) {
   for (const TimeNs t : times) {
     SCOPED_TRACE("file time " + std::to_string(t));
     HandPose got, want;
+    ASSERT_TRUE(src->wait_until_buffered(t));  // the reader thread moves the windows there
     const PoseLookup r = src->lookup(Handedness::right, t, got);
     ASSERT_EQ(r, reference.lookup(t, want));
     if (is_usable(r)) {
@@ -284,6 +285,94 @@ TEST(ReplayHandSource, StreamsALongRecordingInBoundedMemoryWithTheSameAnswers) {
   }
   EXPECT_GT(usable, times.size() / 2);
   EXPECT_FALSE(src->read_failed());
+}
+
+// lookup() runs on the host app's frame thread: it answers from the window
+// the reader thread filled, and never reads the file itself, even where the
+// window does not reach (it used to read, allocate and wait on the disk there).
+TEST(ReplayHandSource, LookupAnswersFromTheWindowAndLeavesReadingToTheReaderThread) {
+  TempDir dir;
+  const fs::path path = dir / "long.prec";
+  constexpr int kLong = 3000;
+  write_recording(path, {{"hand/right", Handedness::right}}, kLong);
+  ReplayOptions o;
+  o.window_samples = 16;
+  o.max_index_entries = 16;
+  auto src = ReplayHandSource::open(path, o);
+  ASSERT_TRUE(src.ok()) << src.error().message;
+  const TimeNs here = kStart + 1000 * kStep + kStep / 2;
+  ASSERT_TRUE(src->wait_until_buffered(here));
+  src->pause_reading_for_testing(true);
+
+  HandPose got;
+  ASSERT_EQ(src->lookup(Handedness::right, here, got), PoseLookup::interpolated);
+  EXPECT_LT((got.joint(HandJoint::wrist).p - wrist_position(here)).norm(), 1e-12);
+  // Further on than the window reaches: the newest pose read, flagged stale.
+  const TimeNs far = kStart + 2500 * kStep;
+  ASSERT_EQ(src->lookup(Handedness::right, far, got), PoseLookup::stale);
+  EXPECT_GT(got.time_ns, here);
+  EXPECT_LT(got.time_ns, far);
+  // Before the window: too old, until the reader has gone back.
+  EXPECT_EQ(src->lookup(Handedness::right, kStart + 10 * kStep, got), PoseLookup::too_old);
+  EXPECT_LE(src->buffered_samples(), o.window_samples);
+
+  // The reader catches up with the latest lookup (kStart + 10 steps) once it may.
+  src->pause_reading_for_testing(false);
+  ASSERT_TRUE(src->wait_until_buffered(far));
+  EXPECT_EQ(src->lookup(Handedness::right, far, got), PoseLookup::exact);
+  EXPECT_EQ(got.joint(HandJoint::wrist).p, analytic_pose(far, Handedness::right).joint(HandJoint::wrist).p);
+  EXPECT_FALSE(src->read_failed());
+}
+
+// The file is cut short under an open source: the window still answers, and
+// the reader, not the lookup, finds out; lookups then answer empty.
+TEST(ReplayHandSource, AFileCutShortAfterOpenStopsTheReaderNotTheLookups) {
+  TempDir dir;
+  const fs::path path = dir / "cut.prec";
+  write_recording(path, {{"hand/right", Handedness::right}}, 3000);
+  ReplayOptions o;
+  o.window_samples = 16;
+  auto src = ReplayHandSource::open(path, o);
+  ASSERT_TRUE(src.ok()) << src.error().message;
+  const TimeNs here = kStart + 100 * kStep;
+  ASSERT_TRUE(src->wait_until_buffered(here));
+  src->pause_reading_for_testing(true);  // else it may meet the cut while reading ahead
+  fs::resize_file(path, 0);
+  HandPose got;
+  EXPECT_EQ(src->lookup(Handedness::right, here, got), PoseLookup::exact);
+  src->pause_reading_for_testing(false);
+  EXPECT_FALSE(src->wait_until_buffered(kStart + 2000 * kStep));
+  EXPECT_TRUE(src->read_failed());
+  EXPECT_EQ(src->lookup(Handedness::right, here, got), PoseLookup::empty);
+  auto pose = src->pose_at(Handedness::right, here);
+  ASSERT_FALSE(pose.ok());
+  EXPECT_EQ(pose.error().code, Errc::io_error);
+}
+
+// A looping replay wraps in time: each pass answers as the first did, the
+// reader starting over from the file's beginning each time.
+TEST(ReplayHandSource, LoopingStartsOverAtTheEnd) {
+  TempDir dir;
+  write_recording(dir / "loop.prec", {{"hand/right", Handedness::right}});
+  ReplayOptions o;
+  o.loop = true;
+  o.window_samples = 8;
+  auto src = ReplayHandSource::open(dir / "loop.prec", o);
+  ASSERT_TRUE(src.ok()) << src.error().message;
+  const DurationNs span = (kSamples - 1) * kStep;
+  for (int pass = 0; pass < 3; ++pass) {
+    for (const int k : {1, 40, 97}) {
+      const TimeNs file_t = kStart + k * kStep + kStep / 3;
+      const TimeNs t = file_t + pass * span;
+      SCOPED_TRACE("pass " + std::to_string(pass) + ", sample " + std::to_string(k));
+      ASSERT_TRUE(src->wait_until_buffered(t));
+      HandPose got;
+      ASSERT_EQ(src->lookup(Handedness::right, t, got), PoseLookup::interpolated);
+      EXPECT_EQ(got.time_ns, t);
+      EXPECT_LT((got.joint(HandJoint::wrist).p - wrist_position(file_t)).norm(), 1e-12);
+    }
+  }
+  EXPECT_LE(src->buffered_samples(), o.window_samples);
 }
 
 TEST(ReplayHandSource, AnIsolatedFarFutureStampCostsOnePose) {

@@ -2,10 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <condition_variable>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <system_error>
+#include <thread>
 #include <utility>
 
 #include "proprio/core/file_io.hpp"
@@ -49,9 +53,40 @@ Result<RecordingReader> for_each_pose(const std::filesystem::path& path, F&& vis
 
 }  // namespace
 
+// Times of the poses in a hand's window, oldest first: the reader thread's own
+// copy, so that it decides what to read next without taking the lock.
+class TimeRing {
+ public:
+  explicit TimeRing(std::size_t capacity) : t_(capacity) {}
+  void clear() noexcept { head_ = size_ = 0; }
+  void push(TimeNs t) noexcept {
+    if (size_ == t_.size()) {
+      head_ = (head_ + 1) % t_.size();
+      --size_;
+    }
+    t_[(head_ + size_++) % t_.size()] = t;
+  }
+  bool empty() const noexcept { return size_ == 0; }
+  bool full() const noexcept { return size_ == t_.size(); }
+  std::size_t size() const noexcept { return size_; }
+  TimeNs oldest() const noexcept { return t_[head_]; }
+  TimeNs newest() const noexcept { return t_[(head_ + size_ - 1) % t_.size()]; }
+  TimeNs at(std::size_t i) const noexcept { return t_[(head_ + i) % t_.size()]; }  // 0 = oldest
+  std::size_t count_after(TimeNs t) const noexcept {
+    std::size_t n = 0;
+    while (n < size_ && t_[(head_ + size_ - 1 - n) % t_.size()] > t) ++n;
+    return n;
+  }
+
+ private:
+  std::vector<TimeNs> t_;
+  std::size_t head_ = 0, size_ = 0;
+};
+
 // One hand's replay: its stream, where its poses are in the file, and a window
-// of consecutive poses read from there.
+// of consecutive poses that the reader thread keeps around the latest lookup.
 struct HandTrack {
+  // Fixed once open() returns.
   Handedness hand = Handedness::left;
   std::optional<StreamId> stream;
   std::size_t samples = 0;
@@ -63,24 +98,82 @@ struct HandTrack {
   };
   std::vector<Entry> index;
   std::size_t stride = 1, since_entry = 0;
-
-  // Streaming state.
-  std::optional<RecordingReader> reader;
-  PoseHistory window;
-  TimestampGuard guard;
-  HandPose held;
-  bool at_end = false;
-  bool failed = false;
-
   DurationNs max_jump_ns;
 
-  HandTrack(const PoseHistoryOptions& ho, DurationNs max_jump) : window(ho), guard(max_jump), max_jump_ns(max_jump) {}
+  // The reader thread's alone (open()'s before the thread starts).
+  std::optional<RecordingReader> reader;
+  TimestampGuard guard;
+  HandPose held;
+  std::array<HandPose, 2> pending;  // accepted, not yet in the window (the guard may release two at once)
+  std::size_t pending_count = 0;
+  bool at_end = false;
+  TimeRing times;
+
+  // Shared, under Stream::mutex; only the reader thread changes the window.
+  PoseHistory window;
+  TimeNs requested_ns = 0;  // file time of the latest lookup
+  bool failed = false;
+  // While the reader waits: requests in [quiet_from_ns, quiet_until_ns) give
+  // it nothing to do, so they need not wake it (most lookups, frame to frame).
+  TimeNs quiet_from_ns = 0, quiet_until_ns = 0;
+
+  HandTrack(const PoseHistoryOptions& ho, DurationNs max_jump)
+      : max_jump_ns(max_jump), guard(max_jump), times(ho.capacity), window(ho) {}
+  bool playable() const noexcept { return stream && samples > 0; }
 };
 
+// Lookups come from the host app's frame thread (the OpenXR layer), which must
+// never wait on the disk nor allocate: a reader thread does all file reading
+// and keeps each hand's window ahead of (and a little behind) the latest
+// lookup; lookups only copy from the window under a short lock.
 struct ReplayHandSource::Stream {
   std::mutex mutex;
-  std::vector<HandTrack> hands;  // indexed by Handedness
+  std::condition_variable wake;      // to the reader: a request moved, or stop
+  std::condition_variable progress;  // to waiters: a window changed or a read failed
+  std::vector<HandTrack> hands;      // indexed by Handedness
   std::size_t max_index_entries = 4096;
+  std::uint64_t requests = 0;  // counts request moves
+  bool stop = false;
+  bool paused = false;
+  std::thread thread;
+
+  ~Stream() {
+    {
+      std::lock_guard lock(mutex);
+      stop = true;
+    }
+    wake.notify_all();
+    if (thread.joinable()) thread.join();
+  }
+
+  // Under the lock: points hand k's reader at file time t. True if it moved.
+  bool request(HandTrack& k, TimeNs t) noexcept {
+    if (k.requested_ns == t) return false;
+    k.requested_ns = t;
+    if (t >= k.quiet_from_ns && t < k.quiet_until_ns) return false;
+    ++requests;
+    return true;
+  }
+  // Under the lock: the window answers for t exactly as the whole stream would.
+  static bool covered(const HandTrack& k, TimeNs t) noexcept {
+    if (k.window.empty()) return false;
+    return (t >= k.window.oldest_time_ns() || k.window.oldest_time_ns() == k.first_ns) &&
+           (t <= k.window.newest_time_ns() || k.window.newest_time_ns() == k.last_ns);
+  }
+  // Waits (not on hot paths) until hand k's window covers t; false if reading failed.
+  bool wait_covered(std::unique_lock<std::mutex>& lock, HandTrack& k, TimeNs t) {
+    if (request(k, t)) wake.notify_one();
+    progress.wait(lock, [&] {
+      if (k.failed || stop || paused || covered(k, t)) return true;
+      if (request(k, t)) wake.notify_one();  // another caller moved it meanwhile
+      return false;
+    });
+    return !k.failed && !k.window.empty();
+  }
+
+  bool step(HandTrack& k);
+  void set_quiet_range(HandTrack& k) noexcept;
+  void run() noexcept;
 };
 
 namespace {
@@ -243,81 +336,206 @@ Result<ReplayHandSource> ReplayHandSource::open(const std::filesystem::path& pat
   src.path_ = path.string();
   src.offset_ns_ = options.time_offset_ns;
   src.loop_ = options.loop;
+
+  // The first window is read here, so that playing from the start answers at
+  // once; the reader thread takes over from there.
+  Stream& st = *src.stream_;
+  for (HandTrack& k : hands) k.requested_ns = k.first_ns;
+  for (bool worked = true; worked;) {
+    worked = false;
+    for (HandTrack& k : hands) {
+      if (k.playable()) worked = st.step(k) || worked;
+    }
+  }
+  try {
+    st.thread = std::thread([&st] { st.run(); });
+  } catch (const std::system_error& e) {
+    return make_error(Errc::unavailable, "cannot start the reader thread to replay " + file + ": " + e.what());
+  }
   return src;
 }
 
 namespace {
 
-// Reads the next pose of the hand's stream into the window. False at the end.
-bool read_forward(HandTrack& k) {
+// Reads the hand's stream on to its next accepted pose(s), into k.pending.
+// False at the end of the file, or on a read error (then k.at_end and failed).
+bool read_forward(HandTrack& k, bool& failed) {
   std::size_t ignored = 0;
   while (!k.at_end) {
     auto rec = k.reader->next();
-    if (!rec) continue;  // a rejected record: the index pass left it out too
-    bool pushed = false;
+    if (!rec) {
+      if (rec.error().code == Errc::parse_error) continue;  // a rejected record: the index pass left it out too
+      failed = k.at_end = true;
+      return false;
+    }
     if (!*rec) {
       k.at_end = true;
-      if (k.guard.finish()) pushed = k.window.push(k.held).ok();
-      return pushed;
+      if (k.guard.finish()) k.pending[k.pending_count++] = k.held;
+      break;
     }
     const auto* p = std::get_if<HandPose>(&(*rec)->payload);
     if (!p || (*rec)->stream != *k.stream || p->hand != k.hand) continue;
-    feed_pose(k, *p, ignored, [&](const HandPose& q, bool) { pushed = k.window.push(q).ok() || pushed; });
-    if (pushed) return true;
+    feed_pose(k, *p, ignored, [&](const HandPose& q, bool) { k.pending[k.pending_count++] = q; });
+    if (k.pending_count > 0) return true;
   }
-  return false;
+  return k.pending_count > 0;
 }
 
-// Puts the window of hand k around file time t: afterwards it holds the poses
-// bracketing t (or the first pose, for t before it; or the last, for t after
-// it), exactly those a fully loaded history would use.
-void fill_window(HandTrack& k, TimeNs t) {
-  const auto restart_at = [&](std::uint64_t offset) {
-    k.window.clear();
-    k.at_end = false;
-    if (!k.reader->seek(offset)) k.failed = true;
-  };
-  const auto from_start = [&] {
-    restart_at(k.first_offset);
-    k.guard = TimestampGuard(k.max_jump_ns);
-  };
-  // The last index entry at or before t, if reading forward would pass it anyway.
-  const auto entry_for = [&](TimeNs t_ns) -> const HandTrack::Entry* {
-    auto it = std::upper_bound(k.index.begin(), k.index.end(), t_ns,
-                               [](TimeNs v, const HandTrack::Entry& e) { return v < e.time_ns; });
-    return it == k.index.begin() ? nullptr : &*std::prev(it);
-  };
-  const auto jump_to = [&](const HandTrack::Entry& e) {
-    restart_at(e.offset);
-    auto rec = k.reader->next();
-    const HandPose* p = rec && *rec ? std::get_if<HandPose>(&(*rec)->payload) : nullptr;
-    if (!p || p->time_ns != e.time_ns) {
-      k.failed = true;  // the file changed under us
-      return;
-    }
-    k.guard.reset(p->time_ns);
-    (void)k.window.push(*p);
-  };
-
-  const bool before_window = k.window.empty() || t < k.window.oldest_time_ns();
-  if (t <= k.first_ns) {
-    if (k.window.empty() || k.window.oldest_time_ns() != k.first_ns) from_start();
-  } else if (before_window) {
-    if (const auto* e = entry_for(t)) {
-      jump_to(*e);
-    } else {
-      from_start();
-    }
-  } else if (t > k.window.newest_time_ns()) {
-    if (const auto* e = entry_for(t); e && e->time_ns > k.window.newest_time_ns()) jump_to(*e);
-  }
-  const TimeNs until = std::min(t, k.last_ns);
-  while (!k.failed && (k.window.empty() || k.window.newest_time_ns() < until)) {
-    if (!read_forward(k)) break;
-  }
+// The last index entry at or before t, if any.
+const HandTrack::Entry* entry_for(const HandTrack& k, TimeNs t) {
+  auto it = std::upper_bound(k.index.begin(), k.index.end(), t,
+                             [](TimeNs v, const HandTrack::Entry& e) { return v < e.time_ns; });
+  return it == k.index.begin() ? nullptr : &*std::prev(it);
 }
 
 }  // namespace
+
+// One piece of work for hand k: moving its reader to where the request is
+// (the window then starts afresh), and/or one more pose into the window. The
+// window ends up holding the poses bracketing the requested time (or the
+// first pose, before it; the last, after it), exactly those a fully loaded
+// history would use, plus up to half its capacity ahead and a quarter behind.
+// False when there is nothing to do until the request moves.
+bool ReplayHandSource::Stream::step(HandTrack& k) {
+  TimeNs t = 0;
+  {
+    std::lock_guard lock(mutex);
+    if (k.failed || paused || stop) return false;
+    t = k.requested_ns;
+  }
+  const auto fail = [&] {
+    {
+      std::lock_guard lock(mutex);
+      k.failed = true;  // the file changed or vanished under us
+    }
+    progress.notify_all();
+    return false;
+  };
+  const auto push = [&](const HandPose& p) {
+    if (!k.times.empty() && p.time_ns <= k.times.newest()) return;  // cannot happen: the guard orders them
+    {
+      std::lock_guard lock(mutex);
+      (void)k.window.push(p);
+    }
+    k.times.push(p.time_ns);
+    progress.notify_all();
+  };
+  const auto restart_at = [&](std::uint64_t offset) {
+    {
+      std::lock_guard lock(mutex);
+      k.window.clear();
+    }
+    k.times.clear();
+    k.pending_count = 0;
+    k.at_end = false;
+    return k.reader->seek(offset).ok();
+  };
+  const auto from_start = [&] {
+    if (!restart_at(k.first_offset)) return false;
+    k.guard = TimestampGuard(k.max_jump_ns);
+    bool read_error = false;
+    if (!read_forward(k, read_error) || k.pending[0].time_ns != k.first_ns) return false;
+    return true;  // pending[0] goes in below
+  };
+  const auto jump_to = [&](const HandTrack::Entry& e) {
+    if (!restart_at(e.offset)) return false;
+    auto rec = k.reader->next();
+    const HandPose* p = rec && *rec ? std::get_if<HandPose>(&(*rec)->payload) : nullptr;
+    if (!p || p->time_ns != e.time_ns) return false;
+    k.guard.reset(p->time_ns);
+    push(*p);
+    return true;
+  };
+
+  bool worked = false;
+  if (t <= k.first_ns) {
+    if (k.times.empty() || k.times.oldest() != k.first_ns) {
+      if (!from_start()) return fail();
+      worked = true;
+    }
+  } else if (k.times.empty() || t < k.times.oldest()) {
+    const HandTrack::Entry* e = entry_for(k, t);
+    if (!(e ? jump_to(*e) : from_start())) return fail();
+    worked = true;
+  } else if (t > k.times.newest()) {
+    if (const auto* e = entry_for(k, t); e && e->time_ns > k.times.newest()) {
+      if (!jump_to(*e)) return fail();
+      worked = true;
+    }
+  }
+
+  const std::size_t cap = k.window.options().capacity;
+  const std::size_t ahead = k.times.count_after(t);
+  const bool short_of_t = k.times.empty() || k.times.newest() < std::min(t, k.last_ns);
+  const bool room = !k.times.full() || k.times.size() - ahead > std::max<std::size_t>(1, cap / 4);
+  if (!short_of_t && ahead >= std::max<std::size_t>(1, cap / 2)) return worked;
+  if (!room) return worked;
+  if (k.pending_count == 0) {
+    if (k.at_end) {
+      // Read to the end without reaching the last pose open() saw: the file changed.
+      if (k.times.empty() || k.times.newest() != k.last_ns) return fail();
+      return worked;
+    }
+    bool read_error = false;
+    if (!read_forward(k, read_error)) {
+      if (read_error || k.times.empty() || k.times.newest() != k.last_ns) return fail();
+      return true;
+    }
+  }
+  push(k.pending[0]);
+  if (--k.pending_count > 0) k.pending[0] = k.pending[1];
+  return true;
+}
+
+// Under the lock, with the reader idle: the requests for which step(k) would
+// still have nothing to do (the inverse of its conditions).
+void ReplayHandSource::Stream::set_quiet_range(HandTrack& k) noexcept {
+  constexpr TimeNs kMin = std::numeric_limits<TimeNs>::min(), kMax = std::numeric_limits<TimeNs>::max();
+  k.quiet_from_ns = 0;
+  k.quiet_until_ns = 0;  // empty: every move wakes the reader
+  if (k.failed) {
+    k.quiet_from_ns = kMin;
+    k.quiet_until_ns = kMax;
+    return;
+  }
+  if (k.times.empty()) return;
+  k.quiet_from_ns = k.times.oldest() == k.first_ns ? kMin : k.times.oldest();
+  if (k.at_end && k.pending_count == 0 && k.times.newest() == k.last_ns) {
+    k.quiet_until_ns = kMax;
+    return;
+  }
+  const std::size_t cap = k.window.options().capacity, n = k.times.size();
+  const std::size_t ahead = std::max<std::size_t>(1, cap / 2), behind = std::max<std::size_t>(1, cap / 4);
+  const TimeNs needs_more_from = n >= ahead ? k.times.at(n - ahead) : kMin;
+  const TimeNs has_room_from = k.times.full() ? k.times.at(behind) : kMin;
+  k.quiet_until_ns = std::max(needs_more_from, has_room_from);
+}
+
+void ReplayHandSource::Stream::run() noexcept {
+  try {
+    std::unique_lock lock(mutex);
+    while (!stop) {
+      const std::uint64_t seen = requests;
+      lock.unlock();
+      bool worked = false;
+      for (HandTrack& k : hands) {
+        if (k.playable()) worked = step(k) || worked;
+      }
+      lock.lock();
+      if (worked) continue;
+      for (HandTrack& k : hands) set_quiet_range(k);
+      wake.wait(lock, [&] { return stop || requests != seen; });
+      for (HandTrack& k : hands) k.quiet_from_ns = k.quiet_until_ns = 0;
+    }
+  } catch (...) {
+    // Out of memory on the reader thread: lookups answer PoseLookup::empty.
+    {
+      std::lock_guard lock(mutex);
+      for (HandTrack& k : hands) k.failed = true;
+    }
+    progress.notify_all();
+  }
+}
 
 ReplayHandSource::ReplayHandSource() : stream_(std::make_unique<Stream>()) {}
 ReplayHandSource::ReplayHandSource(ReplayHandSource&&) noexcept = default;
@@ -358,11 +576,25 @@ PoseLookup ReplayHandSource::lookup(Handedness hand, TimeNs t_ns, HandPose& out)
   if (!available(hand)) return PoseLookup::empty;
   TimeNs file_t = 0;
   if (!to_file_time(t_ns, file_t)) return PoseLookup::too_old;
-  std::lock_guard lock(stream_->mutex);
-  HandTrack& k = stream_->hands[hand_index(hand)];
-  fill_window(k, file_t);
-  if (k.failed || k.window.empty()) return PoseLookup::empty;
-  const PoseLookup r = k.window.lookup(file_t, out);
+  Stream& s = *stream_;
+  HandTrack& k = s.hands[hand_index(hand)];
+  PoseLookup r = PoseLookup::empty;
+  bool moved = false;
+  {
+    std::lock_guard lock(s.mutex);
+    moved = s.request(k, file_t);
+    if (k.failed || k.window.empty()) {
+      r = PoseLookup::empty;
+    } else if (Stream::covered(k, file_t)) {
+      r = k.window.lookup(file_t, out);
+    } else if (file_t < k.window.oldest_time_ns()) {
+      r = PoseLookup::too_old;  // the reader goes back for it
+    } else {
+      out = k.window.newest();  // the reader has not got that far yet
+      r = PoseLookup::stale;
+    }
+  }
+  if (moved) s.wake.notify_one();
   if (is_usable(r)) out.time_ns = t_ns;
   if (r == PoseLookup::stale) out.time_ns += t_ns - file_t;  // back to the caller's clock
   return r;
@@ -373,6 +605,28 @@ bool ReplayHandSource::available(Handedness hand) const noexcept {
   return stream_ && h < stream_->hands.size() && stream_->hands[h].samples > 0;
 }
 
+bool ReplayHandSource::wait_until_buffered(TimeNs t_ns) {
+  TimeNs file_t = 0;
+  if (!to_file_time(t_ns, file_t)) return false;
+  Stream& s = *stream_;
+  std::unique_lock lock(s.mutex);
+  bool ok = true;
+  for (HandTrack& k : s.hands) {
+    if (k.playable()) ok = s.wait_covered(lock, k, file_t) && ok;
+  }
+  return ok;
+}
+
+void ReplayHandSource::pause_reading_for_testing(bool paused) {
+  {
+    std::lock_guard lock(stream_->mutex);
+    stream_->paused = paused;
+    ++stream_->requests;
+  }
+  stream_->wake.notify_all();
+  stream_->progress.notify_all();
+}
+
 std::size_t ReplayHandSource::buffered_samples() const noexcept {
   std::lock_guard lock(stream_->mutex);
   std::size_t n = 0;
@@ -381,8 +635,7 @@ std::size_t ReplayHandSource::buffered_samples() const noexcept {
 }
 
 std::size_t ReplayHandSource::index_entries() const noexcept {
-  std::lock_guard lock(stream_->mutex);
-  std::size_t n = 0;
+  std::size_t n = 0;  // fixed since open()
   for (const HandTrack& k : stream_->hands) n += k.index.size();
   return n;
 }
@@ -402,14 +655,15 @@ Result<HandPose> ReplayHandSource::pose_at(Handedness hand, TimeNs t_ns) {
     return make_error(Errc::out_of_range, "replay of '" + path_ + "': t=" + std::to_string(t_ns) +
                                               " ns minus the time offset overflows");
   }
-  std::lock_guard lock(stream_->mutex);
-  HandTrack& k = stream_->hands[hand_index(hand)];
-  fill_window(k, file_t);
-  if (k.failed || k.window.empty()) {
+  Stream& s = *stream_;
+  HandTrack& k = s.hands[hand_index(hand)];
+  std::unique_lock lock(s.mutex);
+  if (!s.wait_covered(lock, k, file_t)) {
     return make_error(Errc::io_error, "replay of '" + path_ + "': the file changed or became unreadable after it "
                                       "was opened; open it again");
   }
   auto q = k.window.query(file_t);
+  lock.unlock();
   if (!q) {
     return q.error().with_context("replay of '" + path_ + "', " + hand_name + " hand at t=" +
                                   std::to_string(t_ns) + " ns (file time " + std::to_string(file_t) +

@@ -25,6 +25,12 @@ inline constexpr std::uint16_t kRecordingFormatMajor = 1;
 inline constexpr std::uint16_t kRecordingFormatMinor = 0;
 // Larger length fields are corruption, so a damaged file cannot make a reader allocate gigabytes.
 inline constexpr std::uint32_t kRecordingMaxPayloadBytes = 16u << 20;
+// Resynchronising after damage CRC-checks candidate records. A crafted file of
+// plausible headers could make that quadratic, so a reader CRC-checks at most
+// this many times the file's size plus this many bytes per pass (from open()
+// or a seek()), then gives up searching and reports the rest as corrupt.
+inline constexpr std::uint64_t kRecordingResyncBudgetFileSizes = 4;
+inline constexpr std::uint64_t kRecordingResyncBudgetExtraBytes = 16u << 20;
 // |q| must be 1 within this for every stored orientation.
 inline constexpr double kRecordingQuatNormTolerance = 1e-4;
 
@@ -198,6 +204,10 @@ struct RecordingSummary {
   // Records lost in damaged regions, from the End record's count; 0 when the
   // file has no End record (the count is then unknown).
   std::uint64_t lost_records = 0;
+  // Bytes CRC-checked while searching for an intact record after damage
+  // (bounded by kRecordingResyncBudget*), and whether that search gave up.
+  std::uint64_t resync_checked_bytes = 0;
+  bool resync_gave_up = false;
 
   // The writer closed the file and nothing was lost or damaged.
   bool clean() const noexcept { return end == RecordingEnd::clean && ignored_bytes == 0 && invalid_records == 0; }

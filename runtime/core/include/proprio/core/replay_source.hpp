@@ -3,9 +3,10 @@
 // (docs/recording-format.md), so trackers' consumers (OpenXR layer, engine,
 // analysis) run on recorded sessions exactly as on live ones.
 //
-// The recording is streamed, not loaded: open() indexes it in one pass, and
-// lookups read the poses they need through a small window per hand, so memory
-// stays the same for a 10-second and a 10-hour file.
+// The recording is streamed, not loaded: open() indexes it in one pass, and a
+// reader thread keeps a small window of poses per hand around the latest
+// lookup, so memory stays the same for a 10-second and a 10-hour file, and
+// lookup() never touches the file, never allocates and never waits on I/O.
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -67,7 +68,17 @@ class ReplayHandSource final : public HandSource {
   // Errc::out_of_range outside the recorded span (after the offset mapping),
   // Errc::unavailable for a hand without poses or inside a gap.
   Result<HandPose> pose_at(Handedness hand, TimeNs t_ns) override;
+  // Answers from the window only. Where the reader has not caught up with t
+  // yet (a jump in time, a loop starting over), it answers as for a history
+  // that ends (PoseLookup::stale, with the newest pose read) or starts
+  // (PoseLookup::too_old) there, and the reader moves to t. pose_at() waits
+  // for the reader instead.
   PoseLookup lookup(Handedness hand, TimeNs t_ns, HandPose& out) noexcept override;
+  // Waits until every hand's window covers t_ns, so that lookup(t_ns) answers
+  // as if the whole file were loaded. False if reading failed (read_failed()).
+  bool wait_until_buffered(TimeNs t_ns);
+  // Tests: stops the reader thread from reading until called with false.
+  void pause_reading_for_testing(bool paused);
 
   FileTimeRange file_time_range() const noexcept { return range_; }
   DurationNs time_offset_ns() const noexcept { return offset_ns_; }
@@ -84,8 +95,8 @@ class ReplayHandSource final : public HandSource {
   // entries, over both hands. Bounded by the options, whatever the file's length.
   std::size_t buffered_samples() const noexcept;
   std::size_t index_entries() const noexcept;
-  // A lookup failed to read the file (it changed or vanished after open());
-  // such lookups answer PoseLookup::empty.
+  // The reader failed to read the file (it changed or vanished after open());
+  // lookups then answer PoseLookup::empty.
   bool read_failed() const noexcept;
 
  private:
@@ -94,7 +105,7 @@ class ReplayHandSource final : public HandSource {
   bool to_file_time(TimeNs t_ns, TimeNs& file_t) const noexcept;
 
   std::string path_;
-  std::unique_ptr<Stream> stream_;  // per-hand readers, windows and indices, behind a mutex
+  std::unique_ptr<Stream> stream_;  // per-hand windows and indices, and the reader thread filling them
   FileTimeRange range_;
   DurationNs offset_ns_ = 0;
   bool loop_ = false;

@@ -137,11 +137,6 @@ Result<std::string> read_input_file(const std::filesystem::path& path, std::stri
   return text;
 }
 
-void note_input_file(const std::filesystem::path& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) == 0) remember(st);
-}
-
 void forget_input_file(const std::filesystem::path& path) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) return;

@@ -57,10 +57,6 @@ Result<InputFile> open_input_file(const std::filesystem::path& path, std::string
 Result<std::string> read_input_file(const std::filesystem::path& path, std::string_view what,
                                     std::uint64_t max_bytes = kDefaultMaxInputBytes);
 
-// Remembers a file as an input of this process (open_input_file does this);
-// for readers that open files another way (OpenCV, hidapi).
-void note_input_file(const std::filesystem::path& path);
-
 // For a file this process owns and updates in place (a study session's
 // sidecar, read on resume and rewritten after each trial): it stops counting
 // as an input, so write_file_atomic may replace it.

@@ -2,9 +2,11 @@
 // end in an Error or a table whose rows are all as wide as the header, with
 // increasing line numbers, and whose cells read as finite numbers or give an
 // Error; without crash, hang or outsized allocation. Seeds: corpus/csv_reader/.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <string>
 #include <string_view>
 
 #include "proprio/study/csv.hpp"
@@ -38,7 +40,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     auto found = table->require_column(table->header[c]);
     if (!found || *found > c) std::abort();  // the first column of that name
   }
-  if (table->require_column("\x01no such column")) std::abort();
+  // A name no header has is not found (the fuzzer may well write this one into a header).
+  const std::string absent = "\x01no such column";
+  const bool present = std::find(table->header.begin(), table->header.end(), absent) != table->header.end();
+  if (!present && table->require_column(absent)) std::abort();
   // What csv_field writes reads back as the same field.
   if (!table->header.empty()) {
     std::string line = "x,";

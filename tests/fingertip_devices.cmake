@@ -1,4 +1,4 @@
-# Fingertip haptic devices over USB HID (input/devices): the wire protocol,
+# Fingertip haptic devices over USB HID (haptics/fingertip_device): the wire protocol,
 # the emulator with motor dynamics and the host driver. Included by
 # tests/CMakeLists.txt at top level.
 if(PROPRIO_BUILD_TESTS)
@@ -7,7 +7,7 @@ if(PROPRIO_BUILD_TESTS)
       unit/test_fingertip_protocol.cpp
       unit/test_fingertip_emulator.cpp
       unit/test_fingertip_device.cpp
-    DEPS proprio::devices)
+    DEPS proprio::fingertip_device)
 endif()
 list(APPEND PROPRIO_FUZZ_TARGETS fingertip_protocol)
-set(PROPRIO_FUZZ_DEPS_fingertip_protocol proprio::devices)
+set(PROPRIO_FUZZ_DEPS_fingertip_protocol proprio::fingertip_device)

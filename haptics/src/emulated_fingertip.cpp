@@ -1,8 +1,7 @@
 #include "proprio/haptics/emulated_fingertip.hpp"
 
-#include <algorithm>
-#include <cmath>
 #include <sstream>
+#include <utility>
 
 namespace proprio::haptics {
 
@@ -13,11 +12,6 @@ devices::FingertipDeviceKind kind_of(const FingertipDeviceModel& model) {
   if (k == "band_2dof") return devices::FingertipDeviceKind::band_2dof;
   if (k == "platform_3dof") return devices::FingertipDeviceKind::platform_3dof;
   return devices::FingertipDeviceKind::force_vector;
-}
-
-std::int32_t to_micro(double v) {
-  const double x = std::round(v * 1e6);
-  return static_cast<std::int32_t>(std::clamp(x, -2.0e9, 2.0e9));
 }
 
 }  // namespace
@@ -82,7 +76,8 @@ void EmulatedFingertip::send(const MotorAngles& motors, const FingertipForce&, b
   c.mode = devices::FingertipMode::motor_angles;
   c.flags = enabled ? devices::fingertip_command_flags::enable : 0;
   c.count = static_cast<std::uint8_t>(model_->motor_count());
-  for (std::size_t i = 0; i < model_->motor_count(); ++i) c.values[i] = to_micro(motors.rad[i]);
+  // The driver's encoder, so the emulated path sends the bytes a real device would get.
+  (void)devices::set_fingertip_command_values(c, motors.rad);
   c.host_time_ns = now;
   const auto bytes = devices::encode_fingertip_command(c);
   // The device runs up to now on what it had, then this command arrives and

@@ -12,18 +12,18 @@ namespace {
 
 bool is_path(std::string_view device) { return device.rfind("/dev/", 0) == 0; }
 
-bool matches(const devices::HidDeviceInfo& listed, const devices::FingertipDeviceInfo* info, std::string_view device) {
+bool matches(const hid::HidDeviceInfo& listed, const devices::FingertipDeviceInfo* info, std::string_view device) {
   if (is_path(device)) return listed.path == device;
   return listed.serial == device || (info && info->serial_view() == device);
 }
 
-std::string name_of(const devices::HidDeviceInfo& listed) {
+std::string name_of(const hid::HidDeviceInfo& listed) {
   return listed.serial.empty() ? listed.path : listed.serial + " (" + listed.path + ")";
 }
 
 // A started device and what it reported, while the fingers are assigned.
 struct Candidate {
-  const devices::HidDeviceInfo* listed = nullptr;
+  const hid::HidDeviceInfo* listed = nullptr;
   std::shared_ptr<devices::FingertipDevice> device;
   std::optional<devices::FingertipDeviceInfo> info;  // empty: did not come up in time
   bool taken = false;
@@ -118,8 +118,8 @@ std::string HidChannelOptions::describe() const {
   return s;
 }
 
-std::unique_ptr<devices::HidTransport> open_hidapi_transport(const devices::HidDeviceInfo& info) {
-  return std::make_unique<devices::HidapiTransport>(devices::fingertip_device_selector({}, info.path));
+std::unique_ptr<hid::HidTransport> open_hidapi_transport(const hid::HidDeviceInfo& info) {
+  return std::make_unique<hid::HidapiTransport>(devices::fingertip_device_selector({}, info.path));
 }
 
 std::string HidChannel::describe() const {
@@ -127,7 +127,7 @@ std::string HidChannel::describe() const {
 }
 
 Result<std::vector<HidChannel>> open_hid_channels(const HidChannelOptions& options,
-                                                  std::span<const devices::HidDeviceInfo> available,
+                                                  std::span<const hid::HidDeviceInfo> available,
                                                   const HidTransportFactory& open) {
   if (auto s = options.validate(); !s) return s.error();
   if (available.empty()) {

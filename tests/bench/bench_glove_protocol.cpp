@@ -1,6 +1,6 @@
 // The glove's HID path on the host: one report decoded (latency), a recorded
-// stream decoded through GloveStreamDecoder (throughput, in reports and bytes
-// per second), ClockSync per observation, and the emulator per tick.
+// stream decoded through ImuGloveStreamDecoder (throughput, in reports and bytes
+// per second), hid::ClockSync per observation, and the emulator per tick.
 // Run: build/dev/tests/proprio_bench --benchmark_filter=Glove
 //
 // For scale: a 7-IMU glove at 100 Hz sends 200 reports/s, so the host's
@@ -11,10 +11,10 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/devices/clock_sync.hpp"
-#include "proprio/devices/glove_emulator.hpp"
-#include "proprio/devices/glove_protocol.hpp"
-#include "proprio/devices/glove_stream.hpp"
+#include "proprio/hid/clock_sync.hpp"
+#include "proprio/imu_glove_board/imu_glove_emulator.hpp"
+#include "proprio/imu_glove_board/imu_glove_protocol.hpp"
+#include "proprio/imu_glove_board/imu_glove_stream.hpp"
 
 using namespace proprio;
 using namespace proprio::devices;
@@ -33,11 +33,11 @@ std::vector<ImuSample> moving_tick(std::int64_t k, std::size_t imus = 7) {
 }
 
 // The reports of n ticks of an emulated 7-IMU glove, back to back.
-std::vector<std::array<std::uint8_t, kGloveDataReportSize>> emulated_reports(std::int64_t ticks) {
-  auto emu = GloveEmulator::create({});
-  std::vector<GloveEmulatedReport> out;
+std::vector<std::array<std::uint8_t, kImuGloveDataReportSize>> emulated_reports(std::int64_t ticks) {
+  auto emu = ImuGloveEmulator::create({});
+  std::vector<ImuGloveEmulatedReport> out;
   for (std::int64_t k = 0; k < ticks; ++k) (void)emu->tick(k * 10 * kNsPerMillisecond, moving_tick(k), out);
-  std::vector<std::array<std::uint8_t, kGloveDataReportSize>> bytes;
+  std::vector<std::array<std::uint8_t, kImuGloveDataReportSize>> bytes;
   for (const auto& r : out) bytes.push_back(r.bytes);
   return bytes;
 }
@@ -46,12 +46,12 @@ std::vector<std::array<std::uint8_t, kGloveDataReportSize>> emulated_reports(std
 // bytes, field checks and unpacking (no scaling).
 void BM_GloveDecodeDataReport(benchmark::State& state) {
   const auto reports = emulated_reports(1);
-  GloveDataReport out;
+  ImuGloveDataReport out;
   for (auto _ : state) {
     benchmark::DoNotOptimize(decode_data_report(reports[0], out));
     benchmark::ClobberMemory();
   }
-  state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(kGloveDataReportSize));
+  state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(kImuGloveDataReportSize));
   state.SetLabel("one report, 4 IMUs");
 }
 BENCHMARK(BM_GloveDecodeDataReport);
@@ -61,10 +61,10 @@ BENCHMARK(BM_GloveDecodeDataReport);
 // every sample, per-IMU statistics. Time per report = 1 / items_per_second.
 void BM_GloveStreamDecodeThroughput(benchmark::State& state) {
   const auto reports = emulated_reports(1000);
-  std::array<GloveSample, kGloveImusPerReport> out;
+  std::array<ImuGloveSample, kImuGloveImusPerReport> out;
   std::size_t samples = 0;
   for (auto _ : state) {
-    GloveStreamDecoder decoder;
+    ImuGloveStreamDecoder decoder;
     TimeNs t = 0;
     for (const auto& r : reports) {
       t += 5 * kNsPerMillisecond;
@@ -73,7 +73,7 @@ void BM_GloveStreamDecodeThroughput(benchmark::State& state) {
     benchmark::DoNotOptimize(samples);
   }
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(reports.size()));
-  state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(reports.size() * kGloveDataReportSize));
+  state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(reports.size() * kImuGloveDataReportSize));
   state.counters["samples_per_s"] =
       benchmark::Counter(static_cast<double>(samples), benchmark::Counter::kIsRate);
   state.SetLabel("items = reports");
@@ -82,15 +82,15 @@ BENCHMARK(BM_GloveStreamDecodeThroughput)->Unit(benchmark::kMicrosecond);
 
 void BM_GloveCrc16(benchmark::State& state) {
   const auto reports = emulated_reports(1);
-  for (auto _ : state) benchmark::DoNotOptimize(crc16_ccitt(std::span(reports[0]).first(62)));
+  for (auto _ : state) benchmark::DoNotOptimize(hid::crc16_ccitt(std::span(reports[0]).first(62)));
   state.SetBytesProcessed(state.iterations() * 62);
 }
 BENCHMARK(BM_GloveCrc16);
 
-// One ClockSync observation plus one mapping, in steady state (a full 10 s
+// One hid::ClockSync observation plus one mapping, in steady state (a full 10 s
 // window: 40 buckets, hull refit every observation).
 void BM_GloveClockSyncObserve(benchmark::State& state) {
-  ClockSync sync;
+  hid::ClockSync sync;
   Rng rng(1);
   TimeNs host = 1'000'000 * kNsPerSecond;
   std::uint32_t device = 0;
@@ -112,9 +112,9 @@ BENCHMARK(BM_GloveClockSyncObserve);
 
 // Firmware side: quantise 7 IMUs, build and CRC two reports.
 void BM_GloveEmulatorTick(benchmark::State& state) {
-  auto emu = GloveEmulator::create({});
+  auto emu = ImuGloveEmulator::create({});
   const auto tick = moving_tick(3);
-  std::vector<GloveEmulatedReport> out;
+  std::vector<ImuGloveEmulatedReport> out;
   out.reserve(4);
   std::int64_t k = 0;
   for (auto _ : state) {

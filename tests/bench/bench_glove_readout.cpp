@@ -3,8 +3,8 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/glove/calibration.hpp"
-#include "proprio/glove/readout.hpp"
+#include "proprio/stretch_glove/calibration.hpp"
+#include "proprio/stretch_glove/readout.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 
@@ -28,11 +28,11 @@ std::vector<double> one_cycle() {
 // every 16th push the mean filter and solve. Arg: solve_every (16 = the
 // thesis; 1 = a solve on every push, i.e. the cost of one solve).
 void BM_ReadoutPush(benchmark::State& state) {
-  glove::ReadoutOptions o;
+  stretch_glove::ReadoutOptions o;
   o.solve_every = static_cast<int>(state.range(0));
-  auto readout = glove::MatrixReadout::create(StretchGloveLayout::thesis_default(), o);
+  auto readout = stretch_glove::MatrixReadout::create(StretchGloveLayout::thesis_default(), o);
   const auto cm = one_cycle();
-  glove::CellFrame frame = readout->make_frame();
+  stretch_glove::CellFrame frame = readout->make_frame();
   for (std::size_t k = 0; k < 2 * cm.size(); ++k) readout->push(k % cm.size(), cm[k % cm.size()], 0, frame);
   std::size_t k = 0;
   for (auto _ : state) {
@@ -47,10 +47,10 @@ BENCHMARK(BM_ReadoutPush)->Arg(16)->Arg(1);
 // A whole C_m vector solved at once (no window), fault-free and with one
 // NaN row (the cached reduced factorisation).
 void BM_ReadoutSolveBatch(benchmark::State& state) {
-  auto readout = glove::MatrixReadout::create(StretchGloveLayout::thesis_default());
+  auto readout = stretch_glove::MatrixReadout::create(StretchGloveLayout::thesis_default());
   auto cm = one_cycle();
   if (state.range(0) == 1) cm[40] = std::nan("");
-  glove::CellFrame frame = readout->make_frame();
+  stretch_glove::CellFrame frame = readout->make_frame();
   for (auto _ : state) {
     benchmark::DoNotOptimize(readout->solve(cm, 0, frame).ok());
     benchmark::ClobberMemory();
@@ -63,7 +63,7 @@ BENCHMARK(BM_ReadoutSolveBatch)->Arg(0)->Arg(1);
 // and filling the 2 x 5 x 5 input grid.
 void BM_NormalizeAndFillGrid(benchmark::State& state) {
   const auto layout = StretchGloveLayout::thesis_default();
-  glove::MinMaxCalibration cal;
+  stretch_glove::MinMaxCalibration cal;
   Rng rng(1);
   std::vector<float> cells;
   for (const auto& c : layout.cells) {
@@ -71,7 +71,7 @@ void BM_NormalizeAndFillGrid(benchmark::State& state) {
     cal.max_pf.push_back(static_cast<float>(2.0 * c.rest_capacitance_pf));
     cells.push_back(static_cast<float>(c.rest_capacitance_pf * rng.uniform(0.9, 2.1)));
   }
-  const glove::InputGrid grid(layout);
+  const stretch_glove::InputGrid grid(layout);
   std::vector<float> normalized(cells.size());
   std::vector<float> input(kStretchInputSize);
   for (auto _ : state) {

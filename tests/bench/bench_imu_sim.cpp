@@ -3,7 +3,7 @@
 #include <cstdio>
 #include <string>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/subjects.hpp"
@@ -23,7 +23,7 @@ void BM_ImuSimulate7At100Hz(benchmark::State& state) {
   sim::HandMotionGenerator gen(HandModel(shape), mo);
   const bool ideal = state.range(0) == 1;
   const auto options = ideal ? sim::ImuNoiseOptions::ideal() : sim::ImuNoiseOptions{};
-  auto sim = sim::ImuSimulator::create(gen, GloveDescription::vist_default().place_imus(shape), options, 1);
+  auto sim = sim::ImuSimulator::create(gen, ImuGloveDescription::vist_default().place_imus(shape), options, 1);
   if (!sim.ok()) {
     state.SkipWithError(sim.error().message.c_str());
     return;

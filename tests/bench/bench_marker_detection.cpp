@@ -7,7 +7,7 @@
 
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/stereo_image_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/marker_detection.hpp"
@@ -34,7 +34,7 @@ const RenderedFrames& rendered_frames() {
   static const RenderedFrames cache = [] {
     RenderedFrames r;
     const HandShape shape = *sim::sim_subject(3)->shape();
-    auto simulator = sim::StereoImageSimulator::create(GloveDescription::vist_default(), shape, {});
+    auto simulator = sim::StereoImageSimulator::create(ImuGloveDescription::vist_default(), shape, {});
     if (!simulator.ok()) return r;
     sim::StereoImageTruth truth;
     for (const sim::HandMotionFrame& m : free_motion(shape, 30)) {
@@ -51,7 +51,7 @@ const RenderedFrames& rendered_frames() {
 
 void BM_RenderStereoPair(benchmark::State& state) {
   const HandShape shape = *sim::sim_subject(3)->shape();
-  auto simulator = sim::StereoImageSimulator::create(GloveDescription::vist_default(), shape, {});
+  auto simulator = sim::StereoImageSimulator::create(ImuGloveDescription::vist_default(), shape, {});
   if (!simulator.ok()) {
     state.SkipWithError(simulator.error().message.c_str());
     return;
@@ -79,7 +79,7 @@ void BM_DetectStereoPair(benchmark::State& state) {
   }
   vist::MarkerDetectorOptions o;
   o.parallel_stereo = state.range(0) != 0;
-  auto detector = vist::MarkerDetector::create(GloveDescription::vist_default().rig.camera, o);
+  auto detector = vist::MarkerDetector::create(ImuGloveDescription::vist_default().rig.camera, o);
   if (!detector.ok()) {
     state.SkipWithError(detector.error().message.c_str());
     return;
@@ -114,7 +114,7 @@ void BM_DetectImage(benchmark::State& state) {
   }
   vist::MarkerDetectorOptions o;
   o.coarse_step = static_cast<int>(state.range(0));
-  auto detector = vist::MarkerDetector::create(GloveDescription::vist_default().rig.camera, o);
+  auto detector = vist::MarkerDetector::create(ImuGloveDescription::vist_default().rig.camera, o);
   if (!detector.ok()) {
     state.SkipWithError(detector.error().message.c_str());
     return;

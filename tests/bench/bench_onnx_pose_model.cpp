@@ -12,10 +12,10 @@
 #include <filesystem>
 #include <string>
 
-#include "proprio/glove/onnx_pose_model.hpp"
+#include "proprio/stretch_glove/onnx_pose_model.hpp"
 
 using namespace proprio;
-using namespace proprio::glove;
+using namespace proprio::stretch_glove;
 
 namespace {
 

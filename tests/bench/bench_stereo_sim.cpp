@@ -4,7 +4,7 @@
 
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/stereo_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 
@@ -26,7 +26,7 @@ void BM_StereoSimulateFrame(benchmark::State& state) {
   const HandShape shape = *sim::sim_subject(3)->shape();
   sim::StereoSimOptions o;
   o.occlusion = state.range(0) != 0;
-  auto simulator = sim::StereoMarkerSimulator::create(GloveDescription::vist_default(), shape, o);
+  auto simulator = sim::StereoMarkerSimulator::create(ImuGloveDescription::vist_default(), shape, o);
   if (!simulator.ok()) {
     state.SkipWithError(simulator.error().message.c_str());
     return;
@@ -50,7 +50,7 @@ BENCHMARK(BM_StereoSimulateFrame)->Arg(1)->Arg(0);
 // With ground truth filled in, as a session recorder does.
 void BM_StereoSimulateFrameWithTruth(benchmark::State& state) {
   const HandShape shape = *sim::sim_subject(3)->shape();
-  auto simulator = sim::StereoMarkerSimulator::create(GloveDescription::vist_default(), shape, {});
+  auto simulator = sim::StereoMarkerSimulator::create(ImuGloveDescription::vist_default(), shape, {});
   if (!simulator.ok()) {
     state.SkipWithError(simulator.error().message.c_str());
     return;

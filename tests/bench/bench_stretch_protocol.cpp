@@ -11,9 +11,9 @@
 #include <cmath>
 #include <vector>
 
-#include "proprio/devices/stretch_emulator.hpp"
-#include "proprio/devices/stretch_protocol.hpp"
-#include "proprio/devices/stretch_stream.hpp"
+#include "proprio/stretch_board/stretch_emulator.hpp"
+#include "proprio/stretch_board/stretch_protocol.hpp"
+#include "proprio/stretch_board/stretch_stream.hpp"
 
 using namespace proprio;
 using namespace proprio::devices;

@@ -6,7 +6,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/stereo_sim.hpp"
@@ -61,7 +61,7 @@ std::vector<FrameData> make_frames(const HandShape& shape,
 }
 
 void BM_VistCorrespondenceSearch(benchmark::State& state) {
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   const HandShape shape = *sim::sim_subject(3)->shape();
   sim::StereoSimOptions so;
   so.facing = sim::FacingModel::linear_ramp;

@@ -19,7 +19,7 @@ struct Rig {
 
 Rig make_rig() {
   Rig r;
-  r.model = *vist::VistModel::build(GloveDescription::vist_default(), *HandShape::from_measurements(0.19, 0.10),
+  r.model = *vist::VistModel::build(ImuGloveDescription::vist_default(), *HandShape::from_measurements(0.19, 0.10),
                                     Handedness::right);
   r.truth.resize(r.model.segments.size());
   for (std::size_t k = 0; k < r.truth.size(); ++k) {

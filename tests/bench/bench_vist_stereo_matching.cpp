@@ -5,7 +5,7 @@
 
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/stereo_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/stereo_matching.hpp"
@@ -16,7 +16,7 @@ namespace {
 
 void BM_VistStereoMatching(benchmark::State& state) {
   const HandShape shape = *sim::sim_subject(3)->shape();
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   auto simulator = sim::StereoMarkerSimulator::create(glove, shape, {});
   auto matcher = vist::StereoMatcher::create(glove.rig, {});
   if (!simulator.ok() || !matcher.ok()) {

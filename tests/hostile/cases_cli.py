@@ -2,6 +2,7 @@
 and data files that are special files, unknown keys, device paths, the OpenXR
 layer's config and status, exit codes and messages (issue 23)."""
 import os
+import re
 
 from hostile import case
 
@@ -98,6 +99,66 @@ def _(t):
         r"character device")
     fifo = t.fifo("cap.bin")
     t.run("stretch-board", "monitor", "--from-file", fifo, timeout=20).fails_cleanly(r"FIFO")
+
+
+# --- 25: damaged capture files (hid::CaptureReader behind both monitors) ------------------
+
+CAPTURE_MONITORS = [("glove", r"no IMU data"), ("stretch-board", r"no measurements")]
+
+
+def damaged_captures(t, board: str) -> dict[str, bytes]:
+    """A clean 2 s capture of `board`, and the ways a capture arrives broken."""
+    t.run(board, "emulate", "--out", f"{board}.bin", "--seconds", "2", "--force", timeout=60).expect(rc=0)
+    clean = t.path(f"{board}.bin").read_bytes()
+    noise = bytes((i * 167 + 13) % 256 for i in range(5000))
+    return {
+        "garbage_prefix": noise[:37] + clean,
+        "torn_end": clean[:-23],
+        "shifted": clean[:1000] + clean[1003:],
+        "hole": clean[:2000] + bytes(4096) + clean[2000:],
+        "garbage_inside": clean[:3000] + noise + clean[3000:],
+    }
+
+
+@case("25 monitor --from-file resynchronises after damage and says how many bytes it skipped")
+def _(t):
+    for board, _ in CAPTURE_MONITORS:
+        for name, data in damaged_captures(t, board).items():
+            t.write(f"{board}_{name}.bin", data)
+            r = t.run(board, "monitor", "--from-file", f"{board}_{name}.bin", timeout=30)
+            r.expect(rc=0, out=rf"{len(data)} bytes, .* s of device time")
+            if name != "torn_end":
+                r.expect(out=r"bytes skipped to resynchronise")
+
+
+@case("25 monitor --from-file on noise, one ID byte repeated, one byte, or nothing: exit 1, no crash")
+def _(t):
+    for board, no_data in CAPTURE_MONITORS:
+        for name, data in {"noise": bytes((i * 31 + 7) % 256 for i in range(20000)), "ids": b"\x01" * 4096,
+                           "ids21": b"\x21" * 4096, "one": b"\x01", "empty": b""}.items():
+            t.write(f"{name}.bin", data)
+            t.run(board, "monitor", "--from-file", f"{name}.bin", timeout=30).expect(rc=1, out=no_data)
+
+
+@case("25 monitor --from-file streams: 300 MiB of zeros in a 512 MiB address space")
+def _(t):
+    # Reading the whole file (as before issue 25) needed twice its size and
+    # died of bad_alloc here, even under a 768 MiB cap.
+    p = t.path("zeros.bin")
+    with open(p, "wb") as f:
+        f.truncate(300 * 1024 * 1024)  # sparse
+    for board, no_data in CAPTURE_MONITORS:
+        t.run(board, "monitor", "--from-file", p, timeout=60, max_mb=512).expect(
+            rc=1, out=r"314572800 bytes.*" + no_data)
+
+
+@case("25 monitor --from-file refuses a capture above 1 GiB at once, with its size and the limit")
+def _(t):
+    p = t.path("huge.bin")
+    with open(p, "wb") as f:
+        f.truncate(1024 * 1024 * 1024 + 1)  # sparse
+    for board, _ in CAPTURE_MONITORS:
+        t.run(board, "monitor", "--from-file", p, timeout=20).fails_cleanly(r"too large.*limit")
 
 
 @case("23.5 a glove description, layout or device model that is a FIFO or /dev/zero is refused")
@@ -313,3 +374,78 @@ def _(t):
                 % uri)
         t.run("run", "half-cylinder", "--headless", "--frames", "1", "--hand-look", "hand.gltf", "--out", "f",
               timeout=60, max_mb=1536).fails_cleanly(r"FIFO|character device")
+
+
+# --- issue 25: `proprio` hands heavy commands to the family programs in libexec ----------
+
+
+@case("25 a family program missing from PROPRIO_LIBEXEC_DIR: exit 1 naming the path looked at")
+def _(t):
+    empty = t.path("libexec")
+    empty.mkdir()
+    env = {"PROPRIO_LIBEXEC_DIR": str(empty)}
+    for args, program in ((["run", "--help"], "proprio-engine"), (["haptics", "mjcf"], "proprio-haptics"),
+                          (["bench", "vist", "--help"], "proprio-trackers"),
+                          (["glove", "list"], "proprio-devices")):
+        t.run(*args, env=env, timeout=20).fails_cleanly(
+            re.escape(str(empty / program)) + r".*PROPRIO_LIBEXEC_DIR")
+
+
+@case("25 a family program that is a FIFO, a folder or not executable: refused with what it is, no hang")
+def _(t):
+    d = t.path("libexec")
+    d.mkdir()
+    env = {"PROPRIO_LIBEXEC_DIR": str(d)}
+    os.mkfifo(d / "proprio-engine")
+    t.run("run", "--help", env=env, timeout=20).fails_cleanly(r"proprio-engine: a FIFO")
+    (d / "proprio-haptics").mkdir()
+    t.run("haptics", "mjcf", env=env, timeout=20).fails_cleanly(r"proprio-haptics: a folder")
+    (d / "proprio-trackers").write_text("#!/bin/sh\necho ran\n")
+    os.chmod(d / "proprio-trackers", 0o644)
+    t.run("sim-vist", "--help", env=env, timeout=20).fails_cleanly(r"proprio-trackers: not executable")
+
+
+@case("25 proprio's own commands and --help need no family program and load no OpenCV, Vulkan or MuJoCo")
+def _(t):
+    env = {"PROPRIO_LIBEXEC_DIR": str(t.path("nowhere"))}
+    t.run("--help", env=env).expect(rc=0, out=r"(?s)sim-hand.*bench.*stretch-board.*haptics.*psychometric.*xr-probe")
+    t.run("bench", "--help", env=env).expect(rc=0, out=r"(?s)vist .*glove .*haptics .*Time the MuJoCo step")
+    t.write("d.csv", "level,correct,trials\n1,6,10\n2,7,10\n3,9,10\n4,10,10\n")
+    r = t.run("psychometric", "fit", "--data", "d.csv", env={**env, "LD_DEBUG": "files"})
+    r.expect(rc=0, out=r"threshold at 0\.75", no_err=r"opencv|libvulkan|mujoco|hidapi|openxr_loader")
+
+
+@case("25 an unknown command or subcommand is a usage error (exit 1), not an attempt to start a program")
+def _(t):
+    t.run("no-such-command", timeout=20).fails_cleanly(r"subcommand is required|not expected")
+    t.run("bench", "no-such-bench", timeout=20).fails_cleanly(r"subcommand is required|not expected")
+    t.run("--log-level", timeout=20).fails_cleanly(r"--log-level")
+
+
+@case("25 --log-level before a heavy command reaches its program; argv[0] and exit codes pass through")
+def _(t):
+    t.run("--log-level", "debug", "haptics", "mjcf", timeout=60).expect(rc=0, out=r"^<mujoco")
+    t.run("--log-level=warn", "haptics", "mjcf", timeout=60).expect(rc=0, out=r"^<mujoco")
+    t.run("--log-level", "bogus", "haptics", "mjcf", timeout=60).fails_cleanly(r"unknown log level 'bogus'")
+    r = t.run("--log-level", "error", "run", "--help", timeout=60).expect(rc=0, out=r"Usage: \S*proprio run ")
+    assert "proprio-engine" not in r.out, "the family program's name leaked into the usage line"
+    t.run("glove", "monitor", "--seconds", "nan", timeout=20).fails_cleanly(r"not a finite number")
+
+
+# --- 25: the installed data folder ($PROPRIO_DATA_DIR) -----------------------------------
+
+
+@case("25 PROPRIO_DATA_DIR as /dev/zero, a FIFO, a missing path: said once, never another folder, no hang")
+def _(t):
+    fifo = t.fifo("data")
+    for bad, what in (("/dev/zero", "/dev/zero"), (str(fifo), "FIFO|data"), (str(t.path("missing")), "missing")):
+        r = t.run("haptics", "sim", env={"PROPRIO_DATA_DIR": bad}, timeout=30)
+        r.fails_cleanly(r"PROPRIO_DATA_DIR is set to")
+        assert re.search(what, r.err or ""), f"the message does not name {bad}"
+
+
+@case("25 PROPRIO_DATA_DIR as an empty folder: the missing file is named under it")
+def _(t):
+    t.path("empty").mkdir()
+    t.run("haptics", "sim", env={"PROPRIO_DATA_DIR": str(t.path("empty"))}, timeout=30).fails_cleanly(
+        r"empty/haptics/band_2dof\.toml")

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "proprio/openxr_layer/loader_interfaces.hpp"
-#include "proprio/openxr_layer/xr_ext.hpp"
+#include "proprio/core/xr_ext.hpp"
 
 extern "C" XrResult XRAPI_CALL xrNegotiateLoaderApiLayerInterface(const XrNegotiateLoaderInfo*, const char*,
                                                                   XrNegotiateApiLayerRequest*);

@@ -10,7 +10,7 @@
 #include "layer_test_util.hpp"
 #include "mock_motion.hpp"
 #include "proprio/core/xr_interop.hpp"
-#include "proprio/openxr_layer/xr_ext.hpp"
+#include "proprio/core/xr_ext.hpp"
 
 using namespace proprio;
 using layer_test::TempDir;

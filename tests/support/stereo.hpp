@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstdlib>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 
 namespace proprio::testing_support {
 

@@ -1,6 +1,6 @@
 #pragma once
 // Stretch-glove helpers shared by the glove tests.
-#include "proprio/core/stretch_glove_layout.hpp"
+#include "proprio/glove_descriptions/stretch_glove_layout.hpp"
 
 namespace proprio::testing_support {
 

@@ -1,4 +1,4 @@
-// ClockSync: device µs counter -> host CLOCK_MONOTONIC, against a simulated
+// hid::ClockSync: device µs counter -> host CLOCK_MONOTONIC, against a simulated
 // link: a crystal off by ±100 ppm, a counter that wraps, USB/OS latency with
 // a floor, an exponential body and 20 ms stalls, and device restarts.
 //
@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/devices/clock_sync.hpp"
+#include "proprio/hid/clock_sync.hpp"
 
 namespace proprio::devices {
 namespace {
@@ -58,7 +58,7 @@ struct ErrorStats {
   std::vector<double> error_us;  // mapped - true, after warm-up
   std::vector<TimeNs> at_ns;     // when each of those was measured, since the start
   double worst_warmup_us = 0.0;
-  std::vector<ClockSyncEvent> events;
+  std::vector<hid::ClockSyncEvent> events;
   std::vector<TimeNs> event_at_ns;
 
   // Only the samples measured outside [from, to).
@@ -92,10 +92,10 @@ struct ErrorStats {
 };
 
 // 100 Hz ticks, two reports each (the second one USB frame later), mapped
-// online as GloveDevice does: the time of each accepted report from the
+// online as ImuGloveDevice does: the time of each accepted report from the
 // estimate available when it arrives. on_tick may change the link (restart).
-ErrorStats simulate(ClockSync& sync, Link& link, double seconds, DurationNs warmup_ns = 2 * kNsPerSecond,
-                    const std::function<void(TimeNs, Link&, ClockSync&)>& on_tick = {}) {
+ErrorStats simulate(hid::ClockSync& sync, Link& link, double seconds, DurationNs warmup_ns = 2 * kNsPerSecond,
+                    const std::function<void(TimeNs, Link&, hid::ClockSync&)>& on_tick = {}) {
   Rng rng(link.seed);
   ErrorStats stats;
   const TimeNs start = 1'000'000 * kNsPerSecond;  // a host that has been up for 11 days
@@ -115,11 +115,11 @@ ErrorStats simulate(ClockSync& sync, Link& link, double seconds, DurationNs warm
         std::max(rx0, t + kNsPerMillisecond + static_cast<TimeNs>(draw_latency_us(link, rng) * 1000.0));
     last_rx = rx1;
     for (TimeNs rx : {rx0, rx1}) {
-      const ClockSyncEvent e = sync.observe(counter, rx);
-      if (e != ClockSyncEvent::tracked) {
+      const hid::ClockSyncEvent e = sync.observe(counter, rx);
+      if (e != hid::ClockSyncEvent::tracked) {
         stats.events.push_back(e);
         stats.event_at_ns.push_back(t - start);
-        if (e != ClockSyncEvent::ignored) lock_time = t;
+        if (e != hid::ClockSyncEvent::ignored) lock_time = t;
       }
     }
     const double err_us = static_cast<double>(sync.to_host_ns(counter) - t) * 1e-3;
@@ -150,7 +150,7 @@ TEST(ClockSync, TracksDriftJitterAndWraparoundWellBelowAMillisecond) {
     link.clock_ppm = ppm;
     link.boot_counter_us = 0xFFFFFFFFu - 60'000'000u;  // wraps 60 s in
     link.seed = 11;
-    ClockSync sync;
+    hid::ClockSync sync;
     const ErrorStats s = simulate(sync, link, 180.0);
     report(ppm > 0 ? "+100 ppm" : ppm < 0 ? "-100 ppm" : "0 ppm", s, link.floor_us);
     ASSERT_GT(s.error_us.size(), 17000u);
@@ -161,7 +161,7 @@ TEST(ClockSync, TracksDriftJitterAndWraparoundWellBelowAMillisecond) {
     EXPECT_NEAR(sync.skew_ppm(), ppm, 1.0);
     EXPECT_EQ(sync.stats().timestamp_wraps, 1u);
     EXPECT_EQ(sync.stats().relocks, 0u);
-    EXPECT_EQ(s.events, std::vector<ClockSyncEvent>{ClockSyncEvent::locked});
+    EXPECT_EQ(s.events, std::vector<hid::ClockSyncEvent>{hid::ClockSyncEvent::locked});
     EXPECT_GE(sync.span_ns(), 9 * kNsPerSecond);
   }
 }
@@ -170,7 +170,7 @@ TEST(ClockSync, FrequentStallsDoNotMoveTheEnvelope) {
   Link link;
   link.outlier_probability = 0.2;  // one report in five stalls for 20 ms
   link.seed = 5;
-  ClockSync sync;
+  hid::ClockSync sync;
   const ErrorStats s = simulate(sync, link, 60.0);
   report("20% stalls", s, link.floor_us);
   EXPECT_LT(s.max_abs_minus(link.floor_us), kBoundAboveFloorUs);
@@ -179,9 +179,9 @@ TEST(ClockSync, FrequentStallsDoNotMoveTheEnvelope) {
 
 TEST(ClockSync, KnownMinimumLatencyIsSubtracted) {
   Link link;
-  ClockSyncOptions o;
+  hid::ClockSyncOptions o;
   o.min_latency_ns = 100'000;
-  ClockSync sync(o);
+  hid::ClockSync sync(o);
   const ErrorStats s = simulate(sync, link, 30.0);
   report("floor subtracted", s, 0.0);
   EXPECT_LT(s.max_abs(), kBoundAboveFloorUs);
@@ -191,8 +191,8 @@ TEST(ClockSync, KnownMinimumLatencyIsSubtracted) {
 TEST(ClockSync, RelocksWhenTheDeviceRestarts) {
   Link link;
   link.boot_counter_us = 123'456'789;
-  ClockSync sync;
-  const ErrorStats s = simulate(sync, link, 40.0, 2 * kNsPerSecond, [](TimeNs since_start, Link& l, ClockSync&) {
+  hid::ClockSync sync;
+  const ErrorStats s = simulate(sync, link, 40.0, 2 * kNsPerSecond, [](TimeNs since_start, Link& l, hid::ClockSync&) {
     // Power cycle 20 s in: the counter starts again from 0 on a fresh crystal.
     if (since_start == 20 * kNsPerSecond) {
       l.boot_counter_us = 0;
@@ -201,7 +201,7 @@ TEST(ClockSync, RelocksWhenTheDeviceRestarts) {
     }
   });
   report("restart", s, link.floor_us);
-  EXPECT_EQ(s.events, (std::vector<ClockSyncEvent>{ClockSyncEvent::locked, ClockSyncEvent::relocked_backwards}));
+  EXPECT_EQ(s.events, (std::vector<hid::ClockSyncEvent>{hid::ClockSyncEvent::locked, hid::ClockSyncEvent::relocked_backwards}));
   EXPECT_EQ(sync.stats().relocks, 1u);
   EXPECT_LT(s.max_abs_minus(link.floor_us), kBoundAboveFloorUs);
   EXPECT_NEAR(sync.skew_ppm(), -60.0, 2.0);
@@ -209,49 +209,49 @@ TEST(ClockSync, RelocksWhenTheDeviceRestarts) {
 
 TEST(ClockSync, RelocksWhenTheCounterJumpsForward) {
   Link link;
-  ClockSync sync;
-  const ErrorStats s = simulate(sync, link, 20.0, 2 * kNsPerSecond, [](TimeNs since_start, Link& l, ClockSync&) {
+  hid::ClockSync sync;
+  const ErrorStats s = simulate(sync, link, 20.0, 2 * kNsPerSecond, [](TimeNs since_start, Link& l, hid::ClockSync&) {
     if (since_start == 10 * kNsPerSecond) l.boot_counter_us += 1'000'000;  // a second ahead: negative latency
   });
-  EXPECT_EQ(s.events, (std::vector<ClockSyncEvent>{ClockSyncEvent::locked, ClockSyncEvent::relocked_jump}));
+  EXPECT_EQ(s.events, (std::vector<hid::ClockSyncEvent>{hid::ClockSyncEvent::locked, hid::ClockSyncEvent::relocked_jump}));
   EXPECT_LT(s.max_abs_minus(link.floor_us), kBoundAboveFloorUs);
 }
 
 TEST(ClockSync, RelocksWhenReportsStayFarAboveTheLine) {
   Link link;
-  ClockSync sync;
+  hid::ClockSync sync;
   // The counter steps back 80 ms: less than a restart, but every report now
   // looks 80 ms late. Fifty in a row make it a re-lock; lone stalls never do.
-  const ErrorStats s = simulate(sync, link, 20.0, 2 * kNsPerSecond, [](TimeNs since_start, Link& l, ClockSync&) {
+  const ErrorStats s = simulate(sync, link, 20.0, 2 * kNsPerSecond, [](TimeNs since_start, Link& l, hid::ClockSync&) {
     if (since_start == 10 * kNsPerSecond) l.boot_counter_us -= 80'000;
   });
-  ASSERT_EQ(s.events, (std::vector<ClockSyncEvent>{ClockSyncEvent::locked, ClockSyncEvent::relocked_late}));
+  ASSERT_EQ(s.events, (std::vector<hid::ClockSyncEvent>{hid::ClockSyncEvent::locked, hid::ClockSyncEvent::relocked_late}));
   // 50 reports are 25 ticks: the mapping is 80 ms off for a quarter second, then locks again.
   EXPECT_LE(s.event_at_ns[1], 10 * kNsPerSecond + 260 * kNsPerMillisecond);
   EXPECT_LT(s.without(10 * kNsPerSecond, s.event_at_ns[1]).max_abs_minus(link.floor_us), kBoundAboveFloorUs);
 }
 
 TEST(ClockSync, ResetForcesARelock) {
-  ClockSync sync;
+  hid::ClockSync sync;
   EXPECT_FALSE(sync.locked());
   EXPECT_EQ(sync.to_host_ns(5), 0);
-  EXPECT_EQ(sync.observe(1000, 5'000'000), ClockSyncEvent::locked);
+  EXPECT_EQ(sync.observe(1000, 5'000'000), hid::ClockSyncEvent::locked);
   EXPECT_TRUE(sync.locked());
   EXPECT_EQ(sync.to_host_ns(1000), 5'000'000);
   EXPECT_EQ(sync.to_host_ns(2000), 6'000'000);  // nominal rate until there is a slope
   sync.reset();
   EXPECT_FALSE(sync.locked());
-  EXPECT_EQ(sync.observe(7, 9'000'000), ClockSyncEvent::locked);
+  EXPECT_EQ(sync.observe(7, 9'000'000), hid::ClockSyncEvent::locked);
   EXPECT_EQ(sync.stats().relocks, 1u);
   EXPECT_EQ(sync.to_host_ns(7), 9'000'000);
 }
 
 TEST(ClockSync, HostTimeGoingBackwardsIsIgnored) {
-  ClockSync sync;
+  hid::ClockSync sync;
   sync.observe(0, 10'000'000);
   sync.observe(10'000, 20'000'000);
   const TimeNs before = sync.to_host_ns(20'000);
-  EXPECT_EQ(sync.observe(20'000, 15'000'000), ClockSyncEvent::ignored);
+  EXPECT_EQ(sync.observe(20'000, 15'000'000), hid::ClockSyncEvent::ignored);
   EXPECT_EQ(sync.stats().ignored, 1u);
   EXPECT_EQ(sync.to_host_ns(20'000), before);
 }
@@ -259,7 +259,7 @@ TEST(ClockSync, HostTimeGoingBackwardsIsIgnored) {
 TEST(ClockSync, ExtremeInputsDoNotOverflow) {
   // Host times near the ends of int64 and counters all over the place must
   // give some answer, not undefined behaviour (UBSan checks this).
-  ClockSync sync;
+  hid::ClockSync sync;
   Rng rng(3);
   TimeNs rx = std::numeric_limits<TimeNs>::min() + 1000;
   for (int i = 0; i < 2000; ++i) {

@@ -5,12 +5,12 @@
 #include <filesystem>
 
 #include "proprio/core/pose_history.hpp"
-#include "proprio/glove/dataset_recorder.hpp"
+#include "proprio/stretch_glove/dataset_recorder.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 
-namespace proprio::glove {
+namespace proprio::stretch_glove {
 namespace {
 
 // A ground-truth tracker: poses at 90 Hz in a history, like a replayed recording.
@@ -144,4 +144,4 @@ TEST(DatasetRecorder, WithoutOverlappingTruthItSaysSo) {
 }
 
 }  // namespace
-}  // namespace proprio::glove
+}  // namespace proprio::stretch_glove

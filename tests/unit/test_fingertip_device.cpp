@@ -21,8 +21,8 @@
 #include <thread>
 #include <vector>
 
-#include "proprio/devices/fingertip_device.hpp"
-#include "proprio/devices/fingertip_emulator.hpp"
+#include "proprio/fingertip_device/fingertip_device.hpp"
+#include "proprio/fingertip_device/fingertip_emulator.hpp"
 
 // Counts allocations made by the thread that asks for it, to show that the
 // servo-thread calls allocate nothing.
@@ -96,11 +96,11 @@ struct StateLog {
 struct Rig {
   explicit Rig(FingertipEmulatorOptions device_options = {}, FingertipDeviceOptions driver_options = test_options())
       : server(make_emulator(device_options), link),
-        device(std::make_unique<FakeHidTransport>(link), driver_options) {
+        device(std::make_unique<hid::FakeHidTransport>(link), driver_options) {
     device.set_state_callback([this](FingertipLinkState s, std::string_view d) { log.add(s, d); });
     server.start();
   }
-  std::shared_ptr<FakeHidLink> link = std::make_shared<FakeHidLink>();
+  std::shared_ptr<hid::FakeHidLink> link = std::make_shared<hid::FakeHidLink>();
   FingertipEmulatorServer server;
   StateLog log;
   FingertipDevice device;
@@ -148,12 +148,12 @@ bool wait_for_force(FingertipDevice& d, double normal_n, FingertipFeedbackSample
 }
 
 TEST(FingertipDevice, SelectorAndEnumerationFindFingertipDevices) {
-  const HidDeviceSelector any = fingertip_device_selector();
+  const hid::HidDeviceSelector any = fingertip_device_selector();
   EXPECT_EQ(any.vendor_id, 0x1209);
   EXPECT_EQ(any.product_id, 0x0003);
   EXPECT_EQ(any.usage_page, 0xFF00);
   EXPECT_TRUE(any.serial.empty());
-  const HidDeviceSelector one = fingertip_device_selector("FT-R-INDEX");
+  const hid::HidDeviceSelector one = fingertip_device_selector("FT-R-INDEX");
   EXPECT_EQ(one.serial, "FT-R-INDEX");
   EXPECT_NE(one.describe().find("FT-R-INDEX"), std::string::npos);
   EXPECT_EQ(fingertip_device_selector({}, "/dev/hidraw9").path, "/dev/hidraw9");
@@ -161,7 +161,7 @@ TEST(FingertipDevice, SelectorAndEnumerationFindFingertipDevices) {
   // empty or the error says why; either way nothing else shows up in it.
   auto list = enumerate_fingertip_devices();
   if (list) {
-    for (const HidDeviceInfo& d : *list) {
+    for (const hid::HidDeviceInfo& d : *list) {
       EXPECT_EQ(d.vendor_id, kFingertipUsbVendorId);
       EXPECT_EQ(d.product_id, kFingertipUsbProductId);
       EXPECT_TRUE(d.usage_page == kFingertipHidUsagePage || d.usage_page == 0);
@@ -177,7 +177,7 @@ TEST(FingertipDevice, OptionsDescribeThemselvesAndBadOnesAreRefused) {
   o.expected_finger = Finger::index;
   EXPECT_NE(o.describe().find("right index"), std::string::npos) << o.describe();
   o.poll_interval_ns = 0;
-  FingertipDevice d(std::make_unique<FakeHidTransport>(std::make_shared<FakeHidLink>()), o);
+  FingertipDevice d(std::make_unique<hid::FakeHidTransport>(std::make_shared<hid::FakeHidLink>()), o);
   const Status s = d.start();
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("poll_interval_ns"), std::string::npos) << s.error().message;
@@ -232,9 +232,9 @@ TEST(FingertipDevice, CommandsReachTheDeviceAndFeedbackComesBack) {
 }
 
 TEST(FingertipDevice, CommandsWithoutADeviceOrWithBadValuesReturnAtOnce) {
-  auto link = std::make_shared<FakeHidLink>();
+  auto link = std::make_shared<hid::FakeHidLink>();
   link->unplug_for(3600 * kNsPerSecond);
-  FingertipDevice d(std::make_unique<FakeHidTransport>(link), test_options());
+  FingertipDevice d(std::make_unique<hid::FakeHidTransport>(link), test_options());
   EXPECT_EQ(d.command_force(1.0, 0, 0), FingertipCommandStatus::not_connected);
   ASSERT_TRUE(d.start().ok());
   ASSERT_TRUE(wait_until([&] { return d.state() == FingertipLinkState::disconnected; }));
@@ -371,9 +371,9 @@ TEST(FingertipDevice, StopDisablesTheDeviceAtOnceRatherThanByItsWatchdog) {
 }
 
 TEST(FingertipDevice, ADeviceWithoutAnInfoReportIsNotConnectedAndTheReasonSaysWhy) {
-  auto link = std::make_shared<FakeHidLink>();  // no device end: no feature report
+  auto link = std::make_shared<hid::FakeHidLink>();  // no device end: no feature report
   StateLog log;
-  FingertipDevice d(std::make_unique<FakeHidTransport>(link), test_options());
+  FingertipDevice d(std::make_unique<hid::FakeHidTransport>(link), test_options());
   d.set_state_callback([&](FingertipLinkState st, std::string_view detail) { log.add(st, detail); });
   ASSERT_TRUE(d.start().ok());
   ASSERT_TRUE(wait_until([&] { return d.stats().info_failures >= 2; }));
@@ -403,7 +403,7 @@ TEST(FingertipEmulatorServer, FallingFarBehindStallsTheDeviceInsteadOfCatchingUp
   for (const DurationNs max_lag : {DurationNs{100 * kNsPerMillisecond}, DurationNs{0}}) {
     SCOPED_TRACE(max_lag);
     ManualClock clock(1'000 * kNsPerMillisecond);
-    auto link = std::make_shared<FakeHidLink>(clock);
+    auto link = std::make_shared<hid::FakeHidLink>(clock);
     FingertipServeOptions serve;
     serve.max_lag_ns = max_lag;
     FingertipEmulatorServer server(make_emulator({}), link, serve, clock);

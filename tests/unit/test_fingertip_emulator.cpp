@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/devices/fingertip_emulator.hpp"
+#include "proprio/fingertip_device/fingertip_emulator.hpp"
 
 namespace proprio::devices {
 namespace {

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/devices/fingertip_protocol.hpp"
+#include "proprio/fingertip_device/fingertip_protocol.hpp"
 
 namespace proprio::devices {
 namespace {
@@ -21,7 +21,7 @@ using Report = std::array<std::uint8_t, kFingertipReportSize>;
 // After editing a field, the CRC is made right again, so the decoder's field
 // checks (not its CRC check) have to catch the edit.
 void fix_crc(Report& b) {
-  const std::uint16_t crc = crc16_ccitt(std::span<const std::uint8_t>(b).first(62));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span<const std::uint8_t>(b).first(62));
   b[62] = static_cast<std::uint8_t>(crc);
   b[63] = static_cast<std::uint8_t>(crc >> 8);
 }
@@ -100,7 +100,7 @@ TEST(FingertipProtocol, CommandLayoutIsPinnedByteByByte) {
   EXPECT_EQ(u32_at(b, 20), 0x05060708u);
   EXPECT_EQ(u32_at(b, 24), 0x01020304u);
   for (std::size_t i = 28; i < 62; ++i) { EXPECT_EQ(b[i], 0) << "reserved byte " << i; }
-  const std::uint16_t crc = crc16_ccitt(std::span<const std::uint8_t>(b).first(62));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span<const std::uint8_t>(b).first(62));
   EXPECT_EQ(b[62], crc & 0xFF);
   EXPECT_EQ(b[63], crc >> 8);
 }
@@ -401,6 +401,24 @@ TEST(FingertipProtocol, SiValuesRoundAndSaturateOnTheWire) {
   EXPECT_FALSE(fingertip_to_wire(std::nan(""), 1.0, v));
   EXPECT_FALSE(fingertip_to_wire(std::numeric_limits<double>::infinity(), 1.0, v));
   EXPECT_EQ(v, 77);
+}
+
+// The encoder the driver and haptics' emulated device share: the unit follows
+// the mode, only c.count values are written, a non-finite one is reported.
+TEST(FingertipProtocol, CommandValuesFromSiFollowTheModeAndCount) {
+  FingertipCommand c;
+  c.mode = FingertipMode::motor_angles;
+  c.count = 2;
+  c.values = {5, 6, 7};
+  const std::array<double, kFingertipMaxMotors> angles_rad{0.0000016, -0.25, 9.0};
+  EXPECT_TRUE(set_fingertip_command_values(c, angles_rad));
+  EXPECT_EQ(c.values, (std::array<std::int32_t, kFingertipMaxMotors>{2, -250000, 7}));
+
+  c.mode = FingertipMode::force;
+  c.count = 3;
+  const std::array<double, kFingertipMaxMotors> force_n{1.2346, 1e12, std::nan("")};
+  EXPECT_FALSE(set_fingertip_command_values(c, force_n));
+  EXPECT_EQ(c.values, (std::array<std::int32_t, kFingertipMaxMotors>{1235, std::numeric_limits<std::int32_t>::max(), 7}));
 }
 
 TEST(FingertipProtocol, InfoConvertsCountsToOutputAngles) {

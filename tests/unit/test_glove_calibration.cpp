@@ -11,14 +11,14 @@
 #include <sstream>
 #include <unistd.h>
 
-#include "proprio/glove/calibration.hpp"
-#include "proprio/glove/dataset.hpp"
-#include "proprio/glove/readout.hpp"
+#include "proprio/stretch_glove/calibration.hpp"
+#include "proprio/stretch_glove/dataset.hpp"
+#include "proprio/stretch_glove/readout.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "support/stretch_glove.hpp"
 
-namespace proprio::glove {
+namespace proprio::stretch_glove {
 namespace {
 
 namespace fs = std::filesystem;
@@ -404,4 +404,4 @@ TEST(GloveDataset, SimulatedPipelineCalibratesIntoRange) {
 }
 
 }  // namespace
-}  // namespace proprio::glove
+}  // namespace proprio::stretch_glove

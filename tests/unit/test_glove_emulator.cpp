@@ -1,6 +1,6 @@
-// GloveEmulator: driven by proprio::sim's ImuSimulator (the wiring lives
+// ImuGloveEmulator: driven by proprio::sim's ImuSimulator (the wiring lives
 // here, since proprio::devices may not depend on proprio::sim), decoded by
-// GloveStreamDecoder. Also writes and checks the fuzz seed corpus.
+// ImuGloveStreamDecoder. Also writes and checks the fuzz seed corpus.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,10 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
-#include "proprio/devices/glove_emulator.hpp"
-#include "proprio/devices/glove_protocol.hpp"
-#include "proprio/devices/glove_stream.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
+#include "proprio/imu_glove_board/imu_glove_emulator.hpp"
+#include "proprio/imu_glove_board/imu_glove_protocol.hpp"
+#include "proprio/imu_glove_board/imu_glove_stream.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/subjects.hpp"
@@ -45,15 +45,15 @@ std::vector<ImuSample> still(std::size_t n = 7, double ax = 0.0) {
   return out;
 }
 
-GloveEmulator make(GloveEmulatorOptions o = {}) {
-  auto e = GloveEmulator::create(std::move(o));
+ImuGloveEmulator make(ImuGloveEmulatorOptions o = {}) {
+  auto e = ImuGloveEmulator::create(std::move(o));
   EXPECT_TRUE(e.ok()) << (e.ok() ? "" : e.error().message);
   return *e;
 }
 
 // Runs n ticks at the emulator's rate; returns every report's bytes in send order.
-std::vector<GloveEmulatedReport> run(GloveEmulator& e, std::int64_t n, std::int64_t first_tick = 0) {
-  std::vector<GloveEmulatedReport> out;
+std::vector<ImuGloveEmulatedReport> run(ImuGloveEmulator& e, std::int64_t n, std::int64_t first_tick = 0) {
+  std::vector<ImuGloveEmulatedReport> out;
   const DurationNs period = kNsPerSecond / e.rate_hz();
   for (std::int64_t k = first_tick; k < first_tick + n; ++k) {
     EXPECT_TRUE(e.tick(k * period, still(e.options().imu_count, 0.001 * static_cast<double>(k)), out).ok());
@@ -63,11 +63,11 @@ std::vector<GloveEmulatedReport> run(GloveEmulator& e, std::int64_t n, std::int6
 }
 
 struct Decoded {
-  GloveStreamDecoder decoder;
-  std::vector<GloveSample> samples;
-  std::vector<GlovePushResult> results;
-  void push_all(const std::vector<GloveEmulatedReport>& reports) {
-    std::array<GloveSample, 4> buf;
+  ImuGloveStreamDecoder decoder;
+  std::vector<ImuGloveSample> samples;
+  std::vector<ImuGlovePushResult> results;
+  void push_all(const std::vector<ImuGloveEmulatedReport>& reports) {
+    std::array<ImuGloveSample, 4> buf;
     for (const auto& r : reports) {
       results.push_back(decoder.push(r.bytes, buf, r.send_ns));
       for (std::size_t i = 0; i < results.back().sample_count; ++i) samples.push_back(buf[i]);
@@ -81,18 +81,18 @@ struct Decoded {
 TEST(GloveEmulator, EmulatorAndDecoderReproduceImuSimulatorReadingsWithinQuantisation) {
   const HandShape shape = *sim::sim_subject(2)->shape();
   sim::HandMotionGenerator motion(HandModel(shape), sim::HandMotionOptions{});
-  auto imu_sim = sim::ImuSimulator::create(motion, GloveDescription::vist_default().place_imus(shape),
+  auto imu_sim = sim::ImuSimulator::create(motion, ImuGloveDescription::vist_default().place_imus(shape),
                                            sim::ImuNoiseOptions{}, 5);
   ASSERT_TRUE(imu_sim.ok()) << imu_sim.error().message;
   ASSERT_EQ(imu_sim->imu_count(), 7u);
-  GloveEmulatorOptions eo;
+  ImuGloveEmulatorOptions eo;
   eo.imu_count = 7;
   eo.clock_error_ppm = 37.0;
-  GloveEmulator emu = make(eo);
+  ImuGloveEmulator emu = make(eo);
 
-  GloveStreamDecoder decoder;
-  std::array<GloveSample, 4> buf;
-  std::vector<GloveEmulatedReport> out;
+  ImuGloveStreamDecoder decoder;
+  std::array<ImuGloveSample, 4> buf;
+  std::vector<ImuGloveEmulatedReport> out;
   const double qa = 0.5 / accel_counts_per_mps2(AccelRange::g16) * (1 + 1e-9);
   const double qg = 0.5 / gyro_counts_per_radps(GyroRange::dps2000) * (1 + 1e-9);
   double worst_a = 0, worst_g = 0;
@@ -105,10 +105,10 @@ TEST(GloveEmulator, EmulatorAndDecoderReproduceImuSimulatorReadingsWithinQuantis
     ASSERT_EQ(out.size(), 2u);
     for (const auto& r : out) {
       const auto res = decoder.push(r.bytes, buf);
-      ASSERT_EQ(res.verdict, GloveReportVerdict::accepted);
+      ASSERT_EQ(res.verdict, ImuGloveReportVerdict::accepted);
       EXPECT_EQ(res.timestamp_us, emu.device_timestamp_us(tick));
       for (std::size_t i = 0; i < res.sample_count; ++i) {
-        const GloveSample& s = buf[i];
+        const ImuGloveSample& s = buf[i];
         const sim::ImuReading& truth = readings[s.imu.sensor_id];
         ASSERT_EQ(truth.sample.sensor_id, s.imu.sensor_id);
         const bool saturated = truth.accel_saturated || truth.gyro_saturated;
@@ -130,9 +130,9 @@ TEST(GloveEmulator, EmulatorAndDecoderReproduceImuSimulatorReadingsWithinQuantis
 }
 
 TEST(GloveEmulator, SaturatedAndNonFiniteReadingsAreFlaggedAndCounted) {
-  GloveEmulator emu = make();
+  ImuGloveEmulator emu = make();
   Decoded d;
-  std::vector<GloveEmulatedReport> out;
+  std::vector<ImuGloveEmulatedReport> out;
   for (int k = 0; k < 10; ++k) {
     auto s = still();
     if (k % 2 == 0) s[1].accel_mps2.y() = 20 * kG;  // beyond ±16 g
@@ -148,7 +148,7 @@ TEST(GloveEmulator, SaturatedAndNonFiniteReadingsAreFlaggedAndCounted) {
   EXPECT_EQ(st.samples_rejected(), 8u);
   EXPECT_EQ(emu.stats().saturated_samples, 7u);
   EXPECT_EQ(emu.stats().error_samples, 1u);
-  for (const GloveSample& s : d.samples) {
+  for (const ImuGloveSample& s : d.samples) {
     if (s.imu.sensor_id == 1 && (s.status & imu_status::accel_saturated)) {
       EXPECT_NEAR(s.imu.accel_mps2.y(), 32767 / 2048.0 * kG, 1e-9);  // pinned at the rail
     }
@@ -162,14 +162,14 @@ TEST(GloveEmulator, SaturatedAndNonFiniteReadingsAreFlaggedAndCounted) {
 // The device clock
 
 TEST(GloveEmulator, TimestampsFollowTheDriftingCrystalAndWrap) {
-  GloveEmulatorOptions o;
+  ImuGloveEmulatorOptions o;
   o.clock_error_ppm = 80.0;
   o.boot_timestamp_us = 0xFFFFFFFFu - 200'000u;  // wraps 0.2 s in
-  GloveEmulator emu = make(o);
+  ImuGloveEmulator emu = make(o);
   Decoded d;
   d.push_all(run(emu, 100));
   ASSERT_EQ(d.samples.size(), 700u);
-  for (const GloveSample& s : d.samples) {
+  for (const ImuGloveSample& s : d.samples) {
     const std::int64_t k = s.sequence;
     // 10 ms of a crystal 80 ppm fast is 10000.8 counts; the counter truncates.
     EXPECT_NEAR(static_cast<double>(s.device_time_us - static_cast<std::int64_t>(o.boot_timestamp_us)),
@@ -185,16 +185,16 @@ TEST(GloveEmulator, TimestampsFollowTheDriftingCrystalAndWrap) {
 // Faults: each accounted for by the decoder, all reproducible from the seed.
 
 struct FaultRun {
-  GloveEmulatorStats emulated;
-  GloveStreamStats decoded;
-  std::vector<GloveEmulatedReport> reports;
-  std::vector<GloveSample> samples;
+  ImuGloveEmulatorStats emulated;
+  ImuGloveStreamStats decoded;
+  std::vector<ImuGloveEmulatedReport> reports;
+  std::vector<ImuGloveSample> samples;
 };
-FaultRun run_faults(GloveEmulatorFaults f, std::uint64_t seed = 3, std::int64_t ticks = 2000) {
-  GloveEmulatorOptions o;
+FaultRun run_faults(ImuGloveEmulatorFaults f, std::uint64_t seed = 3, std::int64_t ticks = 2000) {
+  ImuGloveEmulatorOptions o;
   o.faults = std::move(f);
   o.seed = seed;
-  GloveEmulator emu = make(o);
+  ImuGloveEmulator emu = make(o);
   Decoded d;
   FaultRun r;
   r.reports = run(emu, ticks);
@@ -206,7 +206,7 @@ FaultRun run_faults(GloveEmulatorFaults f, std::uint64_t seed = 3, std::int64_t 
 }
 
 TEST(GloveEmulatorFaults, CorruptedReportsAreAllCaught) {
-  GloveEmulatorFaults f;
+  ImuGloveEmulatorFaults f;
   f.corrupt_probability = 0.05;
   const FaultRun r = run_faults(f);
   ASSERT_GT(r.emulated.corrupted, 100u);
@@ -215,7 +215,7 @@ TEST(GloveEmulatorFaults, CorruptedReportsAreAllCaught) {
 }
 
 TEST(GloveEmulatorFaults, DroppedReportsAreCountedLost) {
-  GloveEmulatorFaults f;
+  ImuGloveEmulatorFaults f;
   f.drop_probability = 0.05;
   const FaultRun r = run_faults(f);
   ASSERT_GT(r.emulated.dropped, 100u);
@@ -225,7 +225,7 @@ TEST(GloveEmulatorFaults, DroppedReportsAreCountedLost) {
 }
 
 TEST(GloveEmulatorFaults, DuplicatesAreCounted) {
-  GloveEmulatorFaults f;
+  ImuGloveEmulatorFaults f;
   f.duplicate_probability = 0.05;
   const FaultRun r = run_faults(f);
   ASSERT_GT(r.emulated.duplicated, 100u);
@@ -235,7 +235,7 @@ TEST(GloveEmulatorFaults, DuplicatesAreCounted) {
 }
 
 TEST(GloveEmulatorFaults, ReorderedReportsLoseNothing) {
-  GloveEmulatorFaults f;
+  ImuGloveEmulatorFaults f;
   f.reorder_probability = 0.05;
   const FaultRun r = run_faults(f);
   ASSERT_GT(r.emulated.reordered, 100u);
@@ -245,15 +245,15 @@ TEST(GloveEmulatorFaults, ReorderedReportsLoseNothing) {
 }
 
 TEST(GloveEmulatorFaults, StaleSamplesRepeatTheLastValuesAndAreCounted) {
-  GloveEmulatorFaults f;
+  ImuGloveEmulatorFaults f;
   f.stale_probability = 0.1;
   const FaultRun r = run_faults(f, 3, 500);
   ASSERT_GT(r.emulated.stale_samples, 100u);
   std::uint64_t stale = 0;
   for (const auto& imu : r.decoded.imus) stale += imu.stale;
   EXPECT_EQ(stale, r.emulated.stale_samples);
-  std::array<const GloveSample*, 7> last{};
-  for (const GloveSample& s : r.samples) {
+  std::array<const ImuGloveSample*, 7> last{};
+  for (const ImuGloveSample& s : r.samples) {
     if ((s.status & imu_status::stale) && last[s.imu.sensor_id]) {
       EXPECT_EQ(s.imu.accel_mps2, last[s.imu.sensor_id]->imu.accel_mps2);
     }
@@ -262,7 +262,7 @@ TEST(GloveEmulatorFaults, StaleSamplesRepeatTheLastValuesAndAreCounted) {
 }
 
 TEST(GloveEmulatorFaults, EverythingAtOnceIsReproducibleFromTheSeed) {
-  GloveEmulatorFaults f;
+  ImuGloveEmulatorFaults f;
   f.drop_probability = 0.02;
   f.duplicate_probability = 0.02;
   f.corrupt_probability = 0.02;
@@ -282,7 +282,7 @@ TEST(GloveEmulatorFaults, EverythingAtOnceIsReproducibleFromTheSeed) {
   EXPECT_TRUE(differs);
   EXPECT_EQ(a.decoded.device_resets, 1u);
   // Switching one fault off leaves the others' draws alone.
-  GloveEmulatorFaults no_stale = f;
+  ImuGloveEmulatorFaults no_stale = f;
   no_stale.stale_probability = 0.0;
   const FaultRun d = run_faults(no_stale, 11, 1000);
   EXPECT_EQ(d.emulated.dropped, a.emulated.dropped);
@@ -290,10 +290,10 @@ TEST(GloveEmulatorFaults, EverythingAtOnceIsReproducibleFromTheSeed) {
 }
 
 TEST(GloveEmulator, UnpluggingRebootsTheGlove) {
-  GloveEmulatorOptions o;
+  ImuGloveEmulatorOptions o;
   o.boot_timestamp_us = 1000;
   o.faults.unplugs.push_back({kNsPerSecond, kNsPerSecond / 2});
-  GloveEmulator emu = make(o);
+  ImuGloveEmulator emu = make(o);
   const auto reports = run(emu, 300);
   EXPECT_EQ(emu.stats().boots, 2u);
   EXPECT_EQ(emu.stats().ticks_unpowered, 50u);
@@ -318,8 +318,8 @@ TEST(GloveEmulator, UnpluggingRebootsTheGlove) {
 }
 
 TEST(GloveEmulator, SkippedTicksAreOverruns) {
-  GloveEmulator emu = make();
-  std::vector<GloveEmulatedReport> out;
+  ImuGloveEmulator emu = make();
+  std::vector<ImuGloveEmulatedReport> out;
   for (TimeNs t : {0, 10, 40, 50}) ASSERT_TRUE(emu.tick(t * kNsPerMillisecond, still(), out).ok());
   auto third = decode_data_report(out[4].bytes);
   ASSERT_TRUE(third.ok());
@@ -336,40 +336,40 @@ TEST(GloveEmulator, SkippedTicksAreOverruns) {
 // Host commands and device info
 
 TEST(GloveEmulator, AnswersCommandsAsTheFirmwareDoes) {
-  GloveEmulator emu = make();
-  std::vector<GloveEmulatedReport> out;
+  ImuGloveEmulator emu = make();
+  std::vector<ImuGloveEmulatedReport> out;
   auto info = [&](TimeNs t) { return *decode_info_report(emu.info_report(t)); };
-  EXPECT_EQ(info(0).last_command_result, GloveCommandResult::none);
+  EXPECT_EQ(info(0).last_command_result, ImuGloveCommandResult::none);
   EXPECT_TRUE(info(0).streaming);
   EXPECT_EQ(info(0).imu_count, 7);
   EXPECT_EQ(info(0).rate_hz, 100);
 
-  GloveCommand c;
-  c.op = GloveCommandOp::stop_streaming;
+  ImuGloveCommand c;
+  c.op = ImuGloveCommandOp::stop_streaming;
   c.token = 1;
-  EXPECT_EQ(emu.handle_command(encode_command(c)), GloveCommandResult::ok);
+  EXPECT_EQ(emu.handle_command(encode_command(c)), ImuGloveCommandResult::ok);
   ASSERT_TRUE(emu.tick(0, still(), out).ok());
   EXPECT_TRUE(out.empty());
   EXPECT_FALSE(info(0).streaming);
   EXPECT_EQ(info(0).last_command_token, 1);
 
-  c.op = GloveCommandOp::set_rate;
+  c.op = ImuGloveCommandOp::set_rate;
   c.rate_hz = 0;
   c.token = 2;
-  EXPECT_EQ(emu.handle_command(encode_command(c)), GloveCommandResult::bad_argument);
-  EXPECT_EQ(info(0).last_command_result, GloveCommandResult::bad_argument);
+  EXPECT_EQ(emu.handle_command(encode_command(c)), ImuGloveCommandResult::bad_argument);
+  EXPECT_EQ(info(0).last_command_result, ImuGloveCommandResult::bad_argument);
   c.rate_hz = 200;
-  EXPECT_EQ(emu.handle_command(encode_command(c)), GloveCommandResult::ok);
+  EXPECT_EQ(emu.handle_command(encode_command(c)), ImuGloveCommandResult::ok);
   EXPECT_EQ(info(0).rate_hz, 200);
 
-  c.op = GloveCommandOp::set_ranges;
+  c.op = ImuGloveCommandOp::set_ranges;
   c.accel_range = AccelRange::g4;
   c.gyro_range = GyroRange::dps500;
-  EXPECT_EQ(emu.handle_command(encode_command(c)), GloveCommandResult::ok);
+  EXPECT_EQ(emu.handle_command(encode_command(c)), ImuGloveCommandResult::ok);
 
-  c.op = GloveCommandOp::start_streaming;
+  c.op = ImuGloveCommandOp::start_streaming;
   c.token = 3;
-  EXPECT_EQ(emu.handle_command(encode_command(c)), GloveCommandResult::ok);
+  EXPECT_EQ(emu.handle_command(encode_command(c)), ImuGloveCommandResult::ok);
   for (int k = 0; k < 3; ++k) ASSERT_TRUE(emu.tick(k * 5 * kNsPerMillisecond, still(7, 0.25), out).ok());
   ASSERT_EQ(out.size(), 6u);
   auto first = *decode_data_report(out[0].bytes);
@@ -382,23 +382,23 @@ TEST(GloveEmulator, AnswersCommandsAsTheFirmwareDoes) {
   EXPECT_EQ(info(0).last_command_token, 3);
 
   // Bytes that are not a command are answered, not thrown at.
-  EXPECT_EQ(emu.handle_command(Bytes{0x10, 0x10, 1}), GloveCommandResult::bad_report);
+  EXPECT_EQ(emu.handle_command(Bytes{0x10, 0x10, 1}), ImuGloveCommandResult::bad_report);
   const auto start_bytes = encode_command(c);
   Bytes unknown(start_bytes.begin(), start_bytes.end());
   unknown[2] = 0x77;
-  const std::uint16_t crc = crc16_ccitt(std::span(unknown).first(14));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span(unknown).first(14));
   unknown[14] = static_cast<std::uint8_t>(crc);
   unknown[15] = static_cast<std::uint8_t>(crc >> 8);
-  EXPECT_EQ(emu.handle_command(unknown), GloveCommandResult::unknown_command);
-  EXPECT_EQ(info(0).last_command_result, GloveCommandResult::unknown_command);
+  EXPECT_EQ(emu.handle_command(unknown), ImuGloveCommandResult::unknown_command);
+  EXPECT_EQ(info(0).last_command_result, ImuGloveCommandResult::unknown_command);
 }
 
 TEST(GloveEmulator, RefusesBadOptionsAndInputsWithUsableMessages) {
-  auto message = [](GloveEmulatorOptions o) {
-    auto e = GloveEmulator::create(std::move(o));
+  auto message = [](ImuGloveEmulatorOptions o) {
+    auto e = ImuGloveEmulator::create(std::move(o));
     return e.ok() ? std::string() : e.error().message;
   };
-  GloveEmulatorOptions o;
+  ImuGloveEmulatorOptions o;
   o.imu_count = 17;
   EXPECT_NE(message(o).find("imu_count"), std::string::npos);
   o = {};
@@ -414,8 +414,8 @@ TEST(GloveEmulator, RefusesBadOptionsAndInputsWithUsableMessages) {
   o.faults.unplugs.push_back({0, 0});
   EXPECT_NE(message(o).find("unplugs[0]"), std::string::npos);
 
-  GloveEmulator emu = make();
-  std::vector<GloveEmulatedReport> out;
+  ImuGloveEmulator emu = make();
+  std::vector<ImuGloveEmulatedReport> out;
   auto s = emu.tick(0, still(6), out);
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().code, Errc::invalid_argument);
@@ -432,7 +432,7 @@ fs::path corpus_dir() { return fs::path(__FILE__).parent_path().parent_path() / 
 
 using proprio::testing_support::read_bytes;
 using proprio::testing_support::write_bytes;
-Bytes concat(const std::vector<GloveEmulatedReport>& reports) {
+Bytes concat(const std::vector<ImuGloveEmulatedReport>& reports) {
   Bytes out;
   for (const auto& r : reports) out.insert(out.end(), r.bytes.begin(), r.bytes.end());
   return out;
@@ -447,44 +447,44 @@ TEST(GloveSeedCorpus, Regenerate) {
   fs::create_directories(dir);
   fs::remove(dir / "empty_seed");
 
-  GloveEmulator plain = make();
+  ImuGloveEmulator plain = make();
   const auto ten = run(plain, 10);
   write_bytes(dir / "data_report_part0.bin", Bytes(ten[0].bytes.begin(), ten[0].bytes.end()));
   write_bytes(dir / "data_report_part1.bin", Bytes(ten[1].bytes.begin(), ten[1].bytes.end()));
   write_bytes(dir / "stream_7imu_10ticks.bin", concat(ten));
 
-  GloveEmulatorOptions wrap;
+  ImuGloveEmulatorOptions wrap;
   wrap.boot_timestamp_us = 0xFFFFFFFFu - 25'000u;
   wrap.clock_error_ppm = -90;
   wrap.faults.unplugs.push_back({60 * kNsPerMillisecond, 20 * kNsPerMillisecond});
-  GloveEmulator wrapping = make(wrap);
+  ImuGloveEmulator wrapping = make(wrap);
   write_bytes(dir / "stream_wrap_restart.bin", concat(run(wrapping, 12)));
 
-  GloveEmulatorOptions small;
+  ImuGloveEmulatorOptions small;
   small.imu_count = 3;
   small.accel_range = AccelRange::g2;
   small.gyro_range = GyroRange::dps250;
-  GloveEmulator three = make(small);
+  ImuGloveEmulator three = make(small);
   write_bytes(dir / "stream_3imu_ranges.bin", concat(run(three, 4)));
 
-  GloveEmulatorOptions faulty;
+  ImuGloveEmulatorOptions faulty;
   faulty.seed = 2;
   faulty.faults.corrupt_probability = 0.2;
   faulty.faults.duplicate_probability = 0.2;
   faulty.faults.reorder_probability = 0.2;
   faulty.faults.stale_probability = 0.2;
-  GloveEmulator faults = make(faulty);
+  ImuGloveEmulator faults = make(faulty);
   write_bytes(dir / "stream_faults.bin", concat(run(faults, 8)));
 
-  GloveDeviceInfo info;
+  ImuGloveDeviceInfo info;
   info.imu_count = 7;
   info.rate_hz = 100;
   info.streaming = true;
   info.timestamp_us = 123456;
   const auto ib = encode_info_report(info);
   write_bytes(dir / "info_report.bin", Bytes(ib.begin(), ib.end()));
-  GloveCommand c;
-  c.op = GloveCommandOp::set_rate;
+  ImuGloveCommand c;
+  c.op = ImuGloveCommandOp::set_rate;
   c.rate_hz = 200;
   c.token = 5;
   const auto cb = encode_command(c);
@@ -505,11 +505,11 @@ TEST(GloveSeedCorpus, EverySeedStillDecodes) {
     } else if (name.rfind("command", 0) == 0) {
       EXPECT_TRUE(decode_command(b).ok());
     } else {
-      ASSERT_EQ(b.size() % kGloveDataReportSize, 0u);
+      ASSERT_EQ(b.size() % kImuGloveDataReportSize, 0u);
       const bool faulty = name.find("faults") != std::string::npos;
       std::size_t bad = 0;
-      for (std::size_t at = 0; at < b.size(); at += kGloveDataReportSize) {
-        bad += !decode_data_report(std::span(b).subspan(at, kGloveDataReportSize)).ok();
+      for (std::size_t at = 0; at < b.size(); at += kImuGloveDataReportSize) {
+        bad += !decode_data_report(std::span(b).subspan(at, kImuGloveDataReportSize)).ok();
       }
       if (faulty) {
         EXPECT_GT(bad, 0u);

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/devices/glove_protocol.hpp"
-#include "proprio/devices/glove_stream.hpp"
+#include "proprio/imu_glove_board/imu_glove_protocol.hpp"
+#include "proprio/imu_glove_board/imu_glove_stream.hpp"
 #include "support/devices.hpp"
 
 namespace proprio::devices {
@@ -24,10 +24,10 @@ constexpr double kDeg = 0.017453292519943295;
 
 using proprio::testing_support::bytes_of;
 
-GloveDataReport random_report(Rng& rng) {
-  GloveDataReport r;
-  r.imu_total = static_cast<std::uint8_t>(1 + rng.below(kGloveMaxImus));
-  r.first_imu = static_cast<std::uint8_t>(kGloveImusPerReport * rng.below((r.imu_total + 3) / 4));
+ImuGloveDataReport random_report(Rng& rng) {
+  ImuGloveDataReport r;
+  r.imu_total = static_cast<std::uint8_t>(1 + rng.below(kImuGloveMaxImus));
+  r.first_imu = static_cast<std::uint8_t>(kImuGloveImusPerReport * rng.below((r.imu_total + 3) / 4));
   r.sequence = static_cast<std::uint16_t>(rng.next_u64());
   r.timestamp_us = static_cast<std::uint32_t>(rng.next_u64());
   r.flags = static_cast<std::uint8_t>(rng.below(4));
@@ -50,14 +50,14 @@ GloveDataReport random_report(Rng& rng) {
 TEST(GloveCrc, MatchesTheCcittFalseCheckValue) {
   const char* text = "123456789";
   const auto* p = reinterpret_cast<const std::uint8_t*>(text);
-  EXPECT_EQ(crc16_ccitt({p, 9}), 0x29B1);
+  EXPECT_EQ(hid::crc16_ccitt({p, 9}), 0x29B1);
   // Chaining gives the same as one call.
-  EXPECT_EQ(crc16_ccitt({p + 4, 5}, crc16_ccitt({p, 4})), 0x29B1);
-  EXPECT_EQ(crc16_ccitt({}), 0xFFFF);
+  EXPECT_EQ(hid::crc16_ccitt({p + 4, 5}, hid::crc16_ccitt({p, 4})), 0x29B1);
+  EXPECT_EQ(hid::crc16_ccitt({}), 0xFFFF);
 }
 
 TEST(GloveProtocol, DataReportBytesFollowTheDocumentedLayout) {
-  GloveDataReport r;
+  ImuGloveDataReport r;
   r.first_imu = 4;
   r.imu_total = 7;
   r.sequence = 0x1234;
@@ -89,7 +89,7 @@ TEST(GloveProtocol, DataReportBytesFollowTheDocumentedLayout) {
   EXPECT_EQ(0, std::memcmp(&b[14], block0, 12));
   // Block 3 does not exist (IMUs 4-6 only): zero.
   for (std::size_t i = 50; i < 62; ++i) EXPECT_EQ(b[i], 0) << i;
-  const std::uint16_t crc = crc16_ccitt(std::span(b).first(62));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span(b).first(62));
   EXPECT_EQ(b[62], crc & 0xFF);
   EXPECT_EQ(b[63], crc >> 8);
 }
@@ -97,9 +97,9 @@ TEST(GloveProtocol, DataReportBytesFollowTheDocumentedLayout) {
 TEST(GloveProtocol, DataReportRoundTripsBitExact) {
   Rng rng(42);
   for (int n = 0; n < 2000; ++n) {
-    const GloveDataReport r = random_report(rng);
+    const ImuGloveDataReport r = random_report(rng);
     const auto bytes = encode_data_report(r);
-    GloveDataReport back;
+    ImuGloveDataReport back;
     ASSERT_TRUE(decode_data_report(bytes, back).ok()) << describe(decode_data_report(bytes, back));
     ASSERT_EQ(back, r);
     ASSERT_EQ(encode_data_report(back), bytes);
@@ -107,7 +107,7 @@ TEST(GloveProtocol, DataReportRoundTripsBitExact) {
 }
 
 TEST(GloveProtocol, InfoAndCommandReportsRoundTrip) {
-  GloveDeviceInfo info;
+  ImuGloveDeviceInfo info;
   info.firmware = {2, 7, 13};
   info.imu_count = 7;
   info.rate_hz = 250;
@@ -115,7 +115,7 @@ TEST(GloveProtocol, InfoAndCommandReportsRoundTrip) {
   info.gyro_range = GyroRange::dps500;
   info.streaming = true;
   info.last_command_token = 0xA5;
-  info.last_command_result = GloveCommandResult::bad_argument;
+  info.last_command_result = ImuGloveCommandResult::bad_argument;
   info.timestamp_us = 0xFFFFFFF0u;
   const auto ib = encode_info_report(info);
   ASSERT_EQ(ib.size(), 32u);
@@ -124,9 +124,9 @@ TEST(GloveProtocol, InfoAndCommandReportsRoundTrip) {
   ASSERT_TRUE(info_back.ok()) << info_back.error().message;
   EXPECT_EQ(*info_back, info);
 
-  for (auto op : {GloveCommandOp::start_streaming, GloveCommandOp::stop_streaming, GloveCommandOp::set_rate,
-                  GloveCommandOp::set_ranges}) {
-    GloveCommand c;
+  for (auto op : {ImuGloveCommandOp::start_streaming, ImuGloveCommandOp::stop_streaming, ImuGloveCommandOp::set_rate,
+                  ImuGloveCommandOp::set_ranges}) {
+    ImuGloveCommand c;
     c.op = op;
     c.token = 77;
     c.rate_hz = 200;
@@ -144,8 +144,8 @@ TEST(GloveProtocol, InfoAndCommandReportsRoundTrip) {
 // ---------------------------------------------------------------------------
 // Every error path, with the numbers in the status and a message that says what.
 
-GloveDataReport valid_report() {
-  GloveDataReport r;
+ImuGloveDataReport valid_report() {
+  ImuGloveDataReport r;
   r.imu_total = 7;
   r.sequence = 9;
   r.timestamp_us = 1000;
@@ -153,36 +153,36 @@ GloveDataReport valid_report() {
 }
 
 TEST(GloveProtocolErrors, EmptyAndWrongLengths) {
-  GloveDataReport out;
+  ImuGloveDataReport out;
   auto s = decode_data_report({}, out);
-  EXPECT_EQ(s.code, GloveDecodeErrc::empty);
+  EXPECT_EQ(s.code, ImuGloveDecodeErrc::empty);
   const auto good = encode_data_report(valid_report());
   for (std::size_t len : {1u, 63u}) {
     s = decode_data_report(std::span(good).first(len), out);
-    EXPECT_EQ(s.code, GloveDecodeErrc::bad_length) << len;
+    EXPECT_EQ(s.code, ImuGloveDecodeErrc::bad_length) << len;
     EXPECT_EQ(s.expected, 64u);
     EXPECT_EQ(s.actual, len);
   }
   Bytes longer = bytes_of(good);
   longer.push_back(0);
   s = decode_data_report(longer, out);
-  EXPECT_EQ(s.code, GloveDecodeErrc::bad_length);
+  EXPECT_EQ(s.code, ImuGloveDecodeErrc::bad_length);
   EXPECT_EQ(s.actual, 65u);
   EXPECT_NE(describe(s).find("65 bytes"), std::string::npos) << describe(s);
 }
 
 TEST(GloveProtocolErrors, UnknownReportIdAndVersion) {
-  GloveDataReport out;
+  ImuGloveDataReport out;
   Bytes b = bytes_of(encode_data_report(valid_report()));
   b[0] = 0x7E;
   auto s = decode_data_report(b, out);
-  EXPECT_EQ(s.code, GloveDecodeErrc::unknown_report_id);
+  EXPECT_EQ(s.code, ImuGloveDecodeErrc::unknown_report_id);
   EXPECT_EQ(s.actual, 0x7Eu);
 
-  GloveDataReport v2 = valid_report();
+  ImuGloveDataReport v2 = valid_report();
   v2.version = 0x20;  // protocol 2.0, with a valid CRC
   s = decode_data_report(encode_data_report(v2), out);
-  EXPECT_EQ(s.code, GloveDecodeErrc::unsupported_version);
+  EXPECT_EQ(s.code, ImuGloveDecodeErrc::unsupported_version);
   EXPECT_EQ(s.expected, 1u);
   EXPECT_EQ(s.actual, 0x20u);
   auto result = decode_data_report(encode_data_report(v2));
@@ -191,7 +191,7 @@ TEST(GloveProtocolErrors, UnknownReportIdAndVersion) {
   EXPECT_NE(result.error().message.find("version 2.0"), std::string::npos) << result.error().message;
 
   // A newer minor of the same major decodes.
-  GloveDataReport v13 = valid_report();
+  ImuGloveDataReport v13 = valid_report();
   v13.version = 0x13;
   EXPECT_TRUE(decode_data_report(encode_data_report(v13), out).ok());
   EXPECT_EQ(out.version, 0x13);
@@ -201,12 +201,12 @@ TEST(GloveProtocolErrors, CrcMismatchCarriesBothValues) {
   const auto good = encode_data_report(valid_report());
   Bytes b = bytes_of(good);
   b[20] ^= 0x10;
-  GloveDataReport out;
+  ImuGloveDataReport out;
   const auto s = decode_data_report(b, out);
-  ASSERT_EQ(s.code, GloveDecodeErrc::crc_mismatch);
+  ASSERT_EQ(s.code, ImuGloveDecodeErrc::crc_mismatch);
   const std::uint16_t carried = static_cast<std::uint16_t>(b[62] | b[63] << 8);
   EXPECT_EQ(s.expected, carried);
-  EXPECT_EQ(s.actual, crc16_ccitt(std::span(b).first(62)));
+  EXPECT_EQ(s.actual, hid::crc16_ccitt(std::span(b).first(62)));
   EXPECT_NE(s.expected, s.actual);
   auto result = decode_data_report(b);
   ASSERT_FALSE(result.ok());
@@ -220,7 +220,7 @@ TEST(GloveProtocolErrors, CrcMismatchCarriesBothValues) {
 
 TEST(GloveProtocolErrors, EverySingleBitFlipIsDetected) {
   const auto good = encode_data_report(valid_report());
-  GloveDataReport out;
+  ImuGloveDataReport out;
   for (std::size_t byte = 0; byte < good.size(); ++byte) {
     for (int bit = 0; bit < 8; ++bit) {
       Bytes b = bytes_of(good);
@@ -231,54 +231,54 @@ TEST(GloveProtocolErrors, EverySingleBitFlipIsDetected) {
 }
 
 TEST(GloveProtocolErrors, BadImuCountAndFirstImu) {
-  GloveDataReport out;
+  ImuGloveDataReport out;
   for (int total : {0, 17, 255}) {
-    GloveDataReport r = valid_report();
+    ImuGloveDataReport r = valid_report();
     r.imu_total = static_cast<std::uint8_t>(total);
     const auto s = decode_data_report(encode_data_report(r), out);
-    EXPECT_EQ(s.code, GloveDecodeErrc::bad_imu_count) << total;
+    EXPECT_EQ(s.code, ImuGloveDecodeErrc::bad_imu_count) << total;
     EXPECT_EQ(s.actual, static_cast<std::uint32_t>(total));
   }
   for (int first : {1, 3, 8, 12}) {
-    GloveDataReport r = valid_report();  // 7 IMUs: first must be 0 or 4
+    ImuGloveDataReport r = valid_report();  // 7 IMUs: first must be 0 or 4
     r.first_imu = static_cast<std::uint8_t>(first);
     const auto s = decode_data_report(encode_data_report(r), out);
-    EXPECT_EQ(s.code, GloveDecodeErrc::bad_first_imu) << first;
+    EXPECT_EQ(s.code, ImuGloveDecodeErrc::bad_first_imu) << first;
     EXPECT_EQ(s.expected, 7u);
     EXPECT_EQ(s.actual, static_cast<std::uint32_t>(first));
   }
 }
 
 TEST(GloveProtocolErrors, InfoAndCommandChecks) {
-  GloveDeviceInfo info;
+  ImuGloveDeviceInfo info;
   info.imu_count = 7;
   info.rate_hz = 0;
   auto r = decode_info_report(encode_info_report(info));
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("bad rate 0 Hz"), std::string::npos) << r.error().message;
-  info.rate_hz = kGloveMaxRateHz + 1;
+  info.rate_hz = kImuGloveMaxRateHz + 1;
   EXPECT_FALSE(decode_info_report(encode_info_report(info)).ok());
   info.rate_hz = 100;
   info.imu_count = 0;
-  GloveDeviceInfo out;
-  EXPECT_EQ(decode_info_report(encode_info_report(info), out).code, GloveDecodeErrc::bad_imu_count);
+  ImuGloveDeviceInfo out;
+  EXPECT_EQ(decode_info_report(encode_info_report(info), out).code, ImuGloveDecodeErrc::bad_imu_count);
 
   Bytes cmd = bytes_of(encode_command({}));
   cmd[2] = 0x55;  // unknown opcode, CRC fixed up
-  const std::uint16_t crc = crc16_ccitt(std::span(cmd).first(14));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span(cmd).first(14));
   cmd[14] = static_cast<std::uint8_t>(crc);
   cmd[15] = static_cast<std::uint8_t>(crc >> 8);
-  GloveCommand c;
+  ImuGloveCommand c;
   const auto s = decode_command(cmd, c);
-  EXPECT_EQ(s.code, GloveDecodeErrc::unknown_command);
+  EXPECT_EQ(s.code, ImuGloveDecodeErrc::unknown_command);
   EXPECT_EQ(s.actual, 0x55u);
   // A data report handed to the command decoder is the wrong report, not garbage.
-  EXPECT_EQ(decode_command(encode_data_report(valid_report()), c).code, GloveDecodeErrc::unknown_report_id);
+  EXPECT_EQ(decode_command(encode_data_report(valid_report()), c).code, ImuGloveDecodeErrc::unknown_report_id);
 }
 
 TEST(GloveProtocolErrors, EveryCodeHasANameAndAMessage) {
-  for (std::size_t i = 0; i < kGloveDecodeErrcCount; ++i) {
-    const GloveDecodeStatus s{static_cast<GloveDecodeErrc>(i), 1, 2};
+  for (std::size_t i = 0; i < kImuGloveDecodeErrcCount; ++i) {
+    const ImuGloveDecodeStatus s{static_cast<ImuGloveDecodeErrc>(i), 1, 2};
     EXPECT_STRNE(to_string(s.code), "unknown") << i;
     EXPECT_FALSE(describe(s).empty());
   }
@@ -288,7 +288,7 @@ TEST(GloveProtocolErrors, EveryCodeHasANameAndAMessage) {
 // Scales and quantisation
 
 TEST(GloveScales, MatchTheDatasheetSensitivities) {
-  GloveImuRaw raw;
+  ImuGloveImuRaw raw;
   raw.accel = {2048, -2048, 0};
   raw.gyro = {164, -164, 0};
   const ImuSample s = to_imu_sample(raw, 5, AccelRange::g16, GyroRange::dps2000);
@@ -322,7 +322,7 @@ TEST(GloveScales, QuantisationErrorIsAtMostHalfACount) {
       const double amax = 32767.0 / accel_counts_per_mps2(ar), gmax = 32767.0 / gyro_counts_per_radps(gr);
       in.accel_mps2 = Vec3(rng.uniform(-amax, amax), rng.uniform(-amax, amax), rng.uniform(-amax, amax)) * 0.999;
       in.gyro_radps = Vec3(rng.uniform(-gmax, gmax), rng.uniform(-gmax, gmax), rng.uniform(-gmax, gmax)) * 0.999;
-      const GloveImuRaw raw = quantise_imu(in, ar, gr);
+      const ImuGloveImuRaw raw = quantise_imu(in, ar, gr);
       ASSERT_EQ(raw.status, 0);
       const ImuSample out = to_imu_sample(raw, 0, ar, gr);
       worst_a = std::max(worst_a, (out.accel_mps2 - in.accel_mps2).cwiseAbs().maxCoeff());
@@ -343,7 +343,7 @@ TEST(GloveScales, SaturationAndNonFiniteInputsAreFlagged) {
   ImuSample in;
   in.accel_mps2 = Vec3(16 * kG, 0, 0);  // exactly full scale: 32768 counts do not fit
   in.gyro_radps = Vec3(0, -2500 * kDeg, 0);
-  GloveImuRaw raw = quantise_imu(in, AccelRange::g16, GyroRange::dps2000);
+  ImuGloveImuRaw raw = quantise_imu(in, AccelRange::g16, GyroRange::dps2000);
   EXPECT_EQ(raw.accel[0], 32767);
   EXPECT_EQ(raw.gyro[1], -32768);
   EXPECT_EQ(raw.status, imu_status::accel_saturated | imu_status::gyro_saturated);
@@ -364,7 +364,7 @@ TEST(GloveScales, SaturationAndNonFiniteInputsAreFlagged) {
   }
 
   // The host flags a rail value even when the firmware did not.
-  GloveImuRaw quiet;
+  ImuGloveImuRaw quiet;
   quiet.gyro = {0, 0, -32768};
   EXPECT_EQ(host_status(quiet), imu_status::gyro_saturated);
   quiet.gyro = {0, 0, -32767};
@@ -387,7 +387,7 @@ struct Tick {
 std::vector<Bytes> tick_reports(Tick t, std::uint8_t imu_total = 7) {
   std::vector<Bytes> out;
   for (std::uint8_t first = 0; first < imu_total; first = static_cast<std::uint8_t>(first + 4)) {
-    GloveDataReport r;
+    ImuGloveDataReport r;
     r.first_imu = first;
     r.imu_total = imu_total;
     r.sequence = t.seq;
@@ -402,17 +402,17 @@ std::vector<Bytes> tick_reports(Tick t, std::uint8_t imu_total = 7) {
 }
 
 struct Feed {
-  GloveStreamDecoder decoder;
-  std::array<GloveSample, 4> samples{};
-  std::vector<GlovePushResult> results;
-  GlovePushResult push(const Bytes& b, TimeNs rx = 0) {
+  ImuGloveStreamDecoder decoder;
+  std::array<ImuGloveSample, 4> samples{};
+  std::vector<ImuGlovePushResult> results;
+  ImuGlovePushResult push(const Bytes& b, TimeNs rx = 0) {
     results.push_back(decoder.push(b, samples, rx));
     return results.back();
   }
   void tick(Tick t, std::uint8_t imu_total = 7) {
     for (const Bytes& b : tick_reports(t, imu_total)) push(b);
   }
-  const GloveStreamStats& stats() const { return decoder.stats(); }
+  const ImuGloveStreamStats& stats() const { return decoder.stats(); }
 };
 
 constexpr std::uint32_t kPeriodUs = 10000;
@@ -437,10 +437,10 @@ TEST(GloveStream, InOrderStreamIsAllAccepted) {
 TEST(GloveStream, SamplesCarryIdsValuesAndTimes) {
   Feed f;
   const auto r0 = f.push(tick_reports({3, 123456})[1], 777);
-  ASSERT_EQ(r0.verdict, GloveReportVerdict::accepted);
+  ASSERT_EQ(r0.verdict, ImuGloveReportVerdict::accepted);
   ASSERT_EQ(r0.sample_count, 3u);
   for (std::size_t i = 0; i < 3; ++i) {
-    const GloveSample& s = f.samples[i];
+    const ImuGloveSample& s = f.samples[i];
     EXPECT_EQ(s.imu.sensor_id, 4 + i);
     EXPECT_DOUBLE_EQ(s.imu.accel_mps2.x(), static_cast<double>(4 + i) / accel_counts_per_mps2(AccelRange::g16));
     EXPECT_EQ(s.sequence, 3);
@@ -473,15 +473,15 @@ TEST(GloveStream, DuplicatesAndReorderedReportsAreDroppedAndCounted) {
   const auto t30 = tick_reports({30, 30 * kPeriodUs});
   const auto t31 = tick_reports({31, 31 * kPeriodUs});
   // Tick 31 overtakes tick 30; part 0 of 29 comes again.
-  EXPECT_EQ(f.push(t31[0]).verdict, GloveReportVerdict::accepted);
+  EXPECT_EQ(f.push(t31[0]).verdict, ImuGloveReportVerdict::accepted);
   EXPECT_EQ(f.stats().lost, 1u);  // 30/part 0 looks lost for now
-  EXPECT_EQ(f.push(t30[0]).verdict, GloveReportVerdict::late);
+  EXPECT_EQ(f.push(t30[0]).verdict, ImuGloveReportVerdict::late);
   EXPECT_EQ(f.stats().lost, 0u);  // ... until it turns up
-  EXPECT_EQ(f.push(t30[1]).verdict, GloveReportVerdict::accepted);
-  EXPECT_EQ(f.push(t31[1]).verdict, GloveReportVerdict::accepted);
-  EXPECT_EQ(f.push(t31[1]).verdict, GloveReportVerdict::duplicate);
-  EXPECT_EQ(f.push(tick_reports({29, 29 * kPeriodUs})[0]).verdict, GloveReportVerdict::duplicate);
-  EXPECT_EQ(f.push(t30[0]).verdict, GloveReportVerdict::duplicate);  // the late one, again
+  EXPECT_EQ(f.push(t30[1]).verdict, ImuGloveReportVerdict::accepted);
+  EXPECT_EQ(f.push(t31[1]).verdict, ImuGloveReportVerdict::accepted);
+  EXPECT_EQ(f.push(t31[1]).verdict, ImuGloveReportVerdict::duplicate);
+  EXPECT_EQ(f.push(tick_reports({29, 29 * kPeriodUs})[0]).verdict, ImuGloveReportVerdict::duplicate);
+  EXPECT_EQ(f.push(t30[0]).verdict, ImuGloveReportVerdict::duplicate);  // the late one, again
   const auto& s = f.stats();
   EXPECT_EQ(s.duplicates, 3u);
   EXPECT_EQ(s.late, 1u);
@@ -561,7 +561,7 @@ TEST(GloveStream, SequenceAndTimestampWrapsUnwrap) {
     const auto ts = static_cast<std::uint32_t>(ts0 + static_cast<std::uint32_t>(k) * kPeriodUs);
     for (const Bytes& b : tick_reports({seq, ts})) {
       const auto r = f.push(b);
-      ASSERT_EQ(r.verdict, GloveReportVerdict::accepted) << k;
+      ASSERT_EQ(r.verdict, ImuGloveReportVerdict::accepted) << k;
       EXPECT_EQ(r.sequence, 65526 + k);
       EXPECT_EQ(r.device_time_us, static_cast<std::int64_t>(ts0) + k * std::int64_t{kPeriodUs});
       EXPECT_EQ(f.samples[0].device_time_us, r.device_time_us);
@@ -582,7 +582,7 @@ TEST(GloveStream, LongGapBeyondHalfTheSequenceRangeIsResolvedByTheTimestamp) {
   // it as 25536 ticks back.
   const std::int64_t k = 9 + 40000;
   f.tick({static_cast<std::uint16_t>(k), static_cast<std::uint32_t>(k * kPeriodUs)});
-  EXPECT_EQ(f.results.back().verdict, GloveReportVerdict::accepted);
+  EXPECT_EQ(f.results.back().verdict, ImuGloveReportVerdict::accepted);
   EXPECT_EQ(f.results.back().sequence, k);
   EXPECT_EQ(f.stats().lost, 2u * 39999u);
   EXPECT_EQ(f.stats().device_resets, 0u);
@@ -594,13 +594,13 @@ TEST(GloveStream, FlaggedRestartBeginsANewEpochOnce) {
   // Power cycle: counter and sequence start again; both parts carry the flag.
   const auto restart = tick_reports({0, 20, data_flags::stream_start});
   const auto r0 = f.push(restart[0]);
-  EXPECT_EQ(r0.verdict, GloveReportVerdict::accepted);
+  EXPECT_EQ(r0.verdict, ImuGloveReportVerdict::accepted);
   EXPECT_TRUE(r0.device_reset);
   EXPECT_EQ(r0.epoch, 1u);
   const auto r1 = f.push(restart[1]);
-  EXPECT_EQ(r1.verdict, GloveReportVerdict::accepted);
+  EXPECT_EQ(r1.verdict, ImuGloveReportVerdict::accepted);
   EXPECT_FALSE(r1.device_reset);
-  EXPECT_EQ(f.push(restart[1]).verdict, GloveReportVerdict::duplicate);
+  EXPECT_EQ(f.push(restart[1]).verdict, ImuGloveReportVerdict::duplicate);
   for (std::uint16_t k = 1; k < 20; ++k) f.tick({k, 20u + k * kPeriodUs});
   const auto& s = f.stats();
   EXPECT_EQ(s.device_resets, 1u);
@@ -664,7 +664,7 @@ TEST(GloveStream, AttachingMidStreamCountsNoLoss) {
 
 TEST(GloveStream, FlaggedAndRailSamplesAreCountedPerImu) {
   Feed f;
-  GloveDataReport r;
+  ImuGloveDataReport r;
   r.imu_total = 7;
   r.first_imu = 4;
   r.timestamp_us = 100;
@@ -689,31 +689,31 @@ TEST(GloveStream, DecodeErrorsOtherReportsAndOverrunsAreCounted) {
   f.tick({0, 0});
   Bytes bad = tick_reports({1, kPeriodUs})[0];
   bad[30] ^= 1;
-  EXPECT_EQ(f.push(bad).verdict, GloveReportVerdict::decode_error);
-  EXPECT_EQ(f.results.back().decode.code, GloveDecodeErrc::crc_mismatch);
-  EXPECT_EQ(f.push(Bytes(64, 0)).verdict, GloveReportVerdict::decode_error);  // report ID 0
-  EXPECT_EQ(f.push(Bytes{}).verdict, GloveReportVerdict::decode_error);
-  GloveDeviceInfo info;
+  EXPECT_EQ(f.push(bad).verdict, ImuGloveReportVerdict::decode_error);
+  EXPECT_EQ(f.results.back().decode.code, ImuGloveDecodeErrc::crc_mismatch);
+  EXPECT_EQ(f.push(Bytes(64, 0)).verdict, ImuGloveReportVerdict::decode_error);  // report ID 0
+  EXPECT_EQ(f.push(Bytes{}).verdict, ImuGloveReportVerdict::decode_error);
+  ImuGloveDeviceInfo info;
   info.imu_count = 7;
   info.rate_hz = 100;
-  EXPECT_EQ(f.push(bytes_of(encode_info_report(info))).verdict, GloveReportVerdict::other_report);
+  EXPECT_EQ(f.push(bytes_of(encode_info_report(info))).verdict, ImuGloveReportVerdict::other_report);
   f.tick({5, 5 * kPeriodUs, data_flags::overrun});
   const auto& s = f.stats();
   EXPECT_EQ(s.decode_errors, 3u);
-  EXPECT_EQ(s.decode_errors_by_code[static_cast<std::size_t>(GloveDecodeErrc::crc_mismatch)], 1u);
-  EXPECT_EQ(s.decode_errors_by_code[static_cast<std::size_t>(GloveDecodeErrc::unknown_report_id)], 1u);
-  EXPECT_EQ(s.decode_errors_by_code[static_cast<std::size_t>(GloveDecodeErrc::empty)], 1u);
-  EXPECT_EQ(s.last_decode_error.code, GloveDecodeErrc::empty);
+  EXPECT_EQ(s.decode_errors_by_code[static_cast<std::size_t>(ImuGloveDecodeErrc::crc_mismatch)], 1u);
+  EXPECT_EQ(s.decode_errors_by_code[static_cast<std::size_t>(ImuGloveDecodeErrc::unknown_report_id)], 1u);
+  EXPECT_EQ(s.decode_errors_by_code[static_cast<std::size_t>(ImuGloveDecodeErrc::empty)], 1u);
+  EXPECT_EQ(s.last_decode_error.code, ImuGloveDecodeErrc::empty);
   EXPECT_EQ(s.other_reports, 1u);
   EXPECT_EQ(s.device_overruns, 1u);  // one tick, two reports
   EXPECT_EQ(s.lost, 8u);             // ticks 1-4, both parts
 }
 
 TEST(GloveStream, SmallOutputSpanIsNeverOverrun) {
-  GloveStreamDecoder d;
-  std::array<GloveSample, 2> two{};
+  ImuGloveStreamDecoder d;
+  std::array<ImuGloveSample, 2> two{};
   const auto r = d.push(tick_reports({0, 0})[0], two);
-  EXPECT_EQ(r.verdict, GloveReportVerdict::accepted);
+  EXPECT_EQ(r.verdict, ImuGloveReportVerdict::accepted);
   EXPECT_EQ(r.sample_count, 2u);
   EXPECT_EQ(d.stats().samples_good(), 4u);  // all four counted, two written
 }

@@ -9,12 +9,12 @@
 #include <numeric>
 
 #include "proprio/core/random.hpp"
-#include "proprio/glove/readout.hpp"
+#include "proprio/stretch_glove/readout.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "support/stretch_glove.hpp"
 
-namespace proprio::glove {
+namespace proprio::stretch_glove {
 namespace {
 
 using proprio::testing_support::thesis_layout;
@@ -331,4 +331,4 @@ TEST(GloveReadout, RejectsBadInput) {
 }
 
 }  // namespace
-}  // namespace proprio::glove
+}  // namespace proprio::stretch_glove

@@ -9,13 +9,13 @@
 
 #include "proprio/core/one_euro_filter.hpp"
 #include "proprio/core/random.hpp"
-#include "proprio/devices/stretch_emulator.hpp"
-#include "proprio/glove/glove_board_source.hpp"
-#include "proprio/glove/glove_hand_source.hpp"
-#include "proprio/glove_eval/glove_evaluation.hpp"
+#include "proprio/stretch_board/stretch_emulator.hpp"
+#include "proprio/stretch_glove/glove_board_source.hpp"
+#include "proprio/stretch_glove/glove_hand_source.hpp"
+#include "proprio/stretch_glove_eval/glove_evaluation.hpp"
 #include "proprio/sim/subjects.hpp"
 
-namespace proprio::glove {
+namespace proprio::stretch_glove {
 namespace {
 
 const std::filesystem::path kModel = std::filesystem::path(PROPRIO_SOURCE_DIR) / "config/models/stretch_glove_generic.onnx";
@@ -57,11 +57,11 @@ TEST(OneEuroFilter, SmoothsJitterAtRestAndFollowsFastMotion) {
 }
 
 TEST(GloveTracker, TracksAHeldOutSubjectWithTheShippedModel) {
-  glove_eval::GloveSessionSpec spec;
+  stretch_glove_eval::GloveSessionSpec spec;
   spec.subject = 12;
   spec.exploration_s = 40.0;
   spec.task_s = 20.0;
-  auto r = glove_eval::run_glove_session(StretchGloveLayout::thesis_default(), kModel, spec);
+  auto r = stretch_glove_eval::run_glove_session(StretchGloveLayout::thesis_default(), kModel, spec);
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_GT(r->frames, 1000u);
   // The target is 5 degrees over 5 held-out subjects (bench glove); one short session gets slack.
@@ -182,10 +182,10 @@ TEST(GloveTracker, HoldsTheLastPoseWhenMostCellsAreGone) {
 }
 
 TEST(SimGloveSource, StreamsASimulatedWearerInRealTime) {
-  glove_eval::SimGloveSourceOptions o;
+  stretch_glove_eval::SimGloveSourceOptions o;
   o.model = kModel;
   o.exploration_s = 20.0;
-  auto source = glove_eval::make_sim_glove_source(o);
+  auto source = stretch_glove_eval::make_sim_glove_source(o);
   ASSERT_TRUE(source) << source.error().message;
   EXPECT_EQ((*source)->name(), "glove");
   // Poll rather than sleep a fixed time, and accept the newest pose even when
@@ -204,9 +204,9 @@ TEST(SimGloveSource, StreamsASimulatedWearerInRealTime) {
 }
 
 }  // namespace
-}  // namespace proprio::glove
+}  // namespace proprio::stretch_glove
 
-namespace proprio::glove {
+namespace proprio::stretch_glove {
 namespace {
 
 // The whole device path: an emulated read-out board over the in-memory HID
@@ -220,7 +220,7 @@ TEST(GloveBoardSource, TracksThroughTheEmulatedBoardAndSurvivesAnUnplug) {
 #endif
   const auto layout = StretchGloveLayout::thesis_default();
   const int subject_id = 11;
-  auto cal = glove_eval::calibrate_simulated(layout, subject_id, 1, 30.0);
+  auto cal = stretch_glove_eval::calibrate_simulated(layout, subject_id, 1, 30.0);
   ASSERT_TRUE(cal) << cal.error().message;
   auto subject = sim::sim_subject(subject_id);
   ASSERT_TRUE(subject);
@@ -239,13 +239,13 @@ TEST(GloveBoardSource, TracksThroughTheEmulatedBoardAndSurvivesAnUnplug) {
   auto emulator = devices::StretchEmulator::create(
       {}, [cm](std::size_t combination, TimeNs) { return cm[static_cast<Eigen::Index>(combination)]; });
   ASSERT_TRUE(emulator) << emulator.error().message;
-  auto link = std::make_shared<devices::FakeHidLink>();
+  auto link = std::make_shared<hid::FakeHidLink>();
   devices::StretchEmulatorServer server(std::move(*emulator), link);
   auto model = OnnxPoseModel::load(kModel, layout);
   ASSERT_TRUE(model) << model.error().message;
   devices::StretchDeviceOptions dopt;
   dopt.reconnect_backoff_max_ns = 100 * kNsPerMillisecond;
-  auto source = GloveBoardSource::start(std::make_unique<devices::FakeHidTransport>(link), layout,
+  auto source = GloveBoardSource::start(std::make_unique<hid::FakeHidTransport>(link), layout,
                                         std::move(cal->calibration), std::move(*model), {}, dopt);
   ASSERT_TRUE(source) << source.error().message;
   server.start();
@@ -276,4 +276,4 @@ TEST(GloveBoardSource, TracksThroughTheEmulatedBoardAndSurvivesAnUnplug) {
 }
 
 }  // namespace
-}  // namespace proprio::glove
+}  // namespace proprio::stretch_glove

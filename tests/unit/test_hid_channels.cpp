@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/devices/fingertip_emulator.hpp"
+#include "proprio/fingertip_device/fingertip_emulator.hpp"
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
 #include "proprio/haptics/hid_channels.hpp"
@@ -23,10 +23,10 @@ const std::filesystem::path kModelDir = std::filesystem::path(PROPRIO_SOURCE_DIR
 
 struct EmulatedBus {
   struct Device {
-    std::shared_ptr<devices::FakeHidLink> link;
+    std::shared_ptr<hid::FakeHidLink> link;
     std::unique_ptr<devices::FingertipEmulatorServer> server;
   };
-  std::vector<devices::HidDeviceInfo> listed;
+  std::vector<hid::HidDeviceInfo> listed;
   std::map<std::string, Device> by_path;
   std::vector<std::string> opened;
 
@@ -43,10 +43,10 @@ struct EmulatedBus {
     auto emulator = make_device_emulator(shared, options);
     ASSERT_TRUE(emulator) << emulator.error().message;
     Device d;
-    d.link = std::make_shared<devices::FakeHidLink>();
+    d.link = std::make_shared<hid::FakeHidLink>();
     d.server = std::make_unique<devices::FingertipEmulatorServer>(std::move(*emulator), d.link);
     d.server->start();
-    devices::HidDeviceInfo info;
+    hid::HidDeviceInfo info;
     info.path = "/dev/hidraw" + std::to_string(listed.size() + 3);
     info.serial = serial;
     listed.push_back(info);
@@ -54,16 +54,16 @@ struct EmulatedBus {
   }
   // Listed by the OS but never answers (no emulator behind the link).
   void add_silent(const std::string& serial) {
-    devices::HidDeviceInfo info;
+    hid::HidDeviceInfo info;
     info.path = "/dev/hidraw" + std::to_string(listed.size() + 3);
     info.serial = serial;
     listed.push_back(info);
-    by_path[info.path] = Device{std::make_shared<devices::FakeHidLink>(), nullptr};
+    by_path[info.path] = Device{std::make_shared<hid::FakeHidLink>(), nullptr};
   }
   HidTransportFactory factory() {
-    return [this](const devices::HidDeviceInfo& info) -> std::unique_ptr<devices::HidTransport> {
+    return [this](const hid::HidDeviceInfo& info) -> std::unique_ptr<hid::HidTransport> {
       opened.push_back(info.path);
-      return std::make_unique<devices::FakeHidTransport>(by_path.at(info.path).link);
+      return std::make_unique<hid::FakeHidTransport>(by_path.at(info.path).link);
     };
   }
 };

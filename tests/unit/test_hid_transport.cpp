@@ -1,5 +1,5 @@
 // Transports (the fake link, hidapi's failure paths), the SPSC ring and
-// GloveDevice end to end over the fake link: streaming, corrupted and lost
+// ImuGloveDevice end to end over the fake link: streaming, corrupted and lost
 // reports, unplug and replug, silence, flagged samples, a slow consumer.
 //
 // Threads: every wait is for a condition with a generous deadline (20 s);
@@ -16,10 +16,10 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/devices/glove_device.hpp"
-#include "proprio/devices/glove_emulator.hpp"
-#include "proprio/devices/hid_transport.hpp"
-#include "proprio/devices/spsc_ring.hpp"
+#include "proprio/imu_glove_board/imu_glove_device.hpp"
+#include "proprio/imu_glove_board/imu_glove_emulator.hpp"
+#include "proprio/hid/hid_transport.hpp"
+#include "proprio/hid/spsc_ring.hpp"
 #include "support/devices.hpp"
 
 namespace proprio::devices {
@@ -31,10 +31,10 @@ using Bytes = std::vector<std::uint8_t>;
 using proprio::testing_support::wait_until;
 
 // ---------------------------------------------------------------------------
-// SpscRing
+// hid::SpscRing
 
 TEST(SpscRing, KeepsOrderAndRefusesWhenFull) {
-  SpscRing<int> ring(5);
+  hid::SpscRing<int> ring(5);
   EXPECT_EQ(ring.capacity(), 8u);
   for (int i = 0; i < 8; ++i) EXPECT_TRUE(ring.try_push(i));
   EXPECT_FALSE(ring.try_push(99));
@@ -48,7 +48,7 @@ TEST(SpscRing, KeepsOrderAndRefusesWhenFull) {
 }
 
 TEST(SpscRing, TwoThreadsPassEveryValueInOrder) {
-  SpscRing<std::uint64_t> ring(64);  // small, so that it runs full and empty often
+  hid::SpscRing<std::uint64_t> ring(64);  // small, so that it runs full and empty often
   constexpr std::uint64_t kCount = 200000;
   std::atomic<bool> producer_done{false};
   std::thread producer([&] {
@@ -80,12 +80,12 @@ TEST(SpscRing, TwoThreadsPassEveryValueInOrder) {
 }
 
 // ---------------------------------------------------------------------------
-// FakeHidLink / FakeHidTransport
+// hid::FakeHidLink / hid::FakeHidTransport
 
 TEST(FakeHid, DeliversReportsAtTheirReleaseTimeInOrder) {
   ManualClock clock(1000);
-  auto link = std::make_shared<FakeHidLink>(clock);
-  FakeHidTransport t(link);
+  auto link = std::make_shared<hid::FakeHidLink>(clock);
+  hid::FakeHidTransport t(link);
   ASSERT_TRUE(t.open().ok());
   link->push(Bytes{1, 2, 3}, 2000);
   link->push(Bytes{4, 5}, 1500);  // released earlier: read first
@@ -107,8 +107,8 @@ TEST(FakeHid, DeliversReportsAtTheirReleaseTimeInOrder) {
 
 TEST(FakeHid, UnplugKillsTheHandleAndOpenWaitsForTheCable) {
   ManualClock clock(0);
-  auto link = std::make_shared<FakeHidLink>(clock);
-  FakeHidTransport t(link);
+  auto link = std::make_shared<hid::FakeHidLink>(clock);
+  hid::FakeHidTransport t(link);
   ASSERT_TRUE(t.open().ok());
   link->push(Bytes{1}, 50);
   link->schedule_unplug(100, 1000);
@@ -143,8 +143,8 @@ TEST(FakeHid, UnplugKillsTheHandleAndOpenWaitsForTheCable) {
 
 TEST(FakeHid, AHandleOpenedBeforeAnOutageDiesEvenIfNobodyReadDuringIt) {
   ManualClock clock(0);
-  auto link = std::make_shared<FakeHidLink>(clock);
-  FakeHidTransport t(link);
+  auto link = std::make_shared<hid::FakeHidLink>(clock);
+  hid::FakeHidTransport t(link);
   ASSERT_TRUE(t.open().ok());
   link->schedule_unplug(10, 10);
   clock.set(100);  // the cable went out and back in meanwhile: the device re-enumerated
@@ -155,7 +155,7 @@ TEST(FakeHid, AHandleOpenedBeforeAnOutageDiesEvenIfNobodyReadDuringIt) {
 
 TEST(FakeHid, WritesAndFeatureReportsReachTheDeviceSide) {
   ManualClock clock(0);
-  auto link = std::make_shared<FakeHidLink>(clock);
+  auto link = std::make_shared<hid::FakeHidLink>(clock);
   std::vector<Bytes> seen;
   link->set_write_handler([&](std::span<const std::uint8_t> b) { seen.emplace_back(b.begin(), b.end()); });
   link->set_feature_handler([](std::uint8_t id, std::span<std::uint8_t> out) -> std::size_t {
@@ -165,7 +165,7 @@ TEST(FakeHid, WritesAndFeatureReportsReachTheDeviceSide) {
     out[2] = 43;
     return 3;
   });
-  FakeHidTransport t(link);
+  hid::FakeHidTransport t(link);
   EXPECT_FALSE(t.write(Bytes{1}).ok());  // not open
   ASSERT_TRUE(t.open().ok());
   ASSERT_TRUE(t.write(Bytes{0x10, 1, 2}).ok());
@@ -182,14 +182,14 @@ TEST(FakeHid, WritesAndFeatureReportsReachTheDeviceSide) {
 TEST(FakeHid, FaultsAreSeededAndCounted) {
   auto run = [](std::uint64_t seed) {
     ManualClock clock(0);
-    FakeHidFaults f;
+    hid::FakeHidFaults f;
     f.drop_probability = 0.1;
     f.duplicate_probability = 0.1;
     f.corrupt_probability = 0.1;
     f.reorder_probability = 0.1;
     f.seed = seed;
-    auto link = std::make_shared<FakeHidLink>(clock, f);
-    FakeHidTransport t(link);
+    auto link = std::make_shared<hid::FakeHidLink>(clock, f);
+    hid::FakeHidTransport t(link);
     EXPECT_TRUE(t.open().ok());
     for (std::uint8_t i = 0; i < 200; ++i) link->push(Bytes(8, i));
     std::vector<Bytes> got;
@@ -213,13 +213,13 @@ TEST(FakeHid, FaultsAreSeededAndCounted) {
 // hidapi: what can be checked without a glove attached.
 
 TEST(HidapiTransport, AbsentDeviceGivesAnActionableError) {
-  auto list = enumerate_hid_devices();
+  auto list = hid::enumerate_hid_devices();
   ASSERT_TRUE(list.ok()) << list.error().message;  // possibly empty in a container
-  HidDeviceSelector sel;
+  hid::HidDeviceSelector sel;
   sel.vendor_id = 0xFFFF;
   sel.product_id = 0xFFFE;
   sel.serial = "NOPE";
-  HidapiTransport t(sel);
+  hid::HidapiTransport t(sel);
   auto s = t.open();
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().code, Errc::not_found);
@@ -232,13 +232,13 @@ TEST(HidapiTransport, AbsentDeviceGivesAnActionableError) {
   EXPECT_EQ(n.error().code, Errc::unavailable);
   EXPECT_FALSE(t.write(buf).ok());
   EXPECT_FALSE(t.get_feature(2, buf).ok());
-  EXPECT_FALSE(hidapi_version().empty());
+  EXPECT_FALSE(hid::hidapi_version().empty());
 }
 
 TEST(HidapiTransport, UnopenablePathSaysWhichAndWhatToDo) {
-  HidDeviceSelector sel;
+  hid::HidDeviceSelector sel;
   sel.path = "/nonexistent/hidraw99";
-  HidapiTransport t(sel);
+  hid::HidapiTransport t(sel);
   auto s = t.open();
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().code, Errc::not_found);
@@ -250,9 +250,9 @@ TEST(HidapiTransport, UnopenablePathSaysWhichAndWhatToDo) {
 TEST(HidapiTransport, APathThatIsNoHidrawNodeIsRefusedBeforeHidapiSeesIt) {
   // hidapi's hidraw backend crashed on these (exit 139).
   for (const char* path : {"/dev/null", "/dev/zero", "/etc/hostname", "/tmp"}) {
-    HidDeviceSelector sel;
+    hid::HidDeviceSelector sel;
     sel.path = path;
-    HidapiTransport t(sel);
+    hid::HidapiTransport t(sel);
     auto s = t.open();
     ASSERT_FALSE(s.ok()) << path;
     EXPECT_EQ(s.error().code, Errc::invalid_argument) << path;
@@ -262,7 +262,7 @@ TEST(HidapiTransport, APathThatIsNoHidrawNodeIsRefusedBeforeHidapiSeesIt) {
 }
 
 // ---------------------------------------------------------------------------
-// GloveDevice over the fake link, fed by the emulator in real time.
+// ImuGloveDevice over the fake link, fed by the emulator in real time.
 
 // IMU i at tick k: values that identify both, well inside the ranges.
 std::vector<ImuSample> synthetic_tick(std::int64_t k, std::size_t imus = 7) {
@@ -276,22 +276,22 @@ std::vector<ImuSample> synthetic_tick(std::int64_t k, std::size_t imus = 7) {
 }
 
 struct Rig {
-  explicit Rig(GloveEmulatorOptions eo = {}, FakeHidFaults faults = {}, GloveDeviceOptions dopts = test_options())
-      : link(std::make_shared<FakeHidLink>(MonotonicClock::instance(), faults)),
-        emulator(*GloveEmulator::create(eo)),
-        device(std::make_unique<FakeHidTransport>(link), dopts) {
+  explicit Rig(ImuGloveEmulatorOptions eo = {}, hid::FakeHidFaults faults = {}, ImuGloveDeviceOptions dopts = test_options())
+      : link(std::make_shared<hid::FakeHidLink>(MonotonicClock::instance(), faults)),
+        emulator(*ImuGloveEmulator::create(eo)),
+        device(std::make_unique<hid::FakeHidTransport>(link), dopts) {
     link->set_write_handler([this](std::span<const std::uint8_t> b) {
       std::lock_guard lock(emulator_mutex);
       emulator.handle_command(b);
     });
     link->set_feature_handler([this](std::uint8_t id, std::span<std::uint8_t> out) -> std::size_t {
-      if (id != static_cast<std::uint8_t>(GloveReportId::device_info) || out.size() < kGloveInfoReportSize) return 0;
+      if (id != static_cast<std::uint8_t>(ImuGloveReportId::device_info) || out.size() < kImuGloveInfoReportSize) return 0;
       std::lock_guard lock(emulator_mutex);
       const auto info = emulator.info_report(MonotonicClock::instance().now_ns() - t0);
       std::copy(info.begin(), info.end(), out.begin());
       return info.size();
     });
-    device.set_state_callback([this](GloveLinkState s, std::string_view) {
+    device.set_state_callback([this](hid::LinkState s, std::string_view) {
       std::lock_guard lock(states_mutex);
       states.push_back(s);
     });
@@ -301,8 +301,8 @@ struct Rig {
   Rig(const Rig&) = delete;
   Rig& operator=(const Rig&) = delete;
 
-  static GloveDeviceOptions test_options() {
-    GloveDeviceOptions o;
+  static ImuGloveDeviceOptions test_options() {
+    ImuGloveDeviceOptions o;
     o.read_timeout_ns = 20 * kNsPerMillisecond;
     o.reconnect_backoff_min_ns = 5 * kNsPerMillisecond;
     o.reconnect_backoff_max_ns = 50 * kNsPerMillisecond;
@@ -314,7 +314,7 @@ struct Rig {
   void schedule(std::int64_t ticks) {
     t0 = MonotonicClock::instance().now_ns() + 30 * kNsPerMillisecond;
     Rng rng(77);
-    std::vector<GloveEmulatedReport> out;
+    std::vector<ImuGloveEmulatedReport> out;
     for (std::int64_t k = 0; k < ticks; ++k) {
       out.clear();
       {
@@ -337,7 +337,7 @@ struct Rig {
   bool drain_until(const std::function<bool()>& pred, std::chrono::seconds timeout = 20s) {
     return wait_until(
         [&] {
-          GloveSample s;
+          ImuGloveSample s;
           while (device.pop(s)) samples.push_back(s);
           return pred();
         },
@@ -348,24 +348,24 @@ struct Rig {
     return MonotonicClock::instance().now_ns() > last_release && link->pending() == 0 &&
            device.stats().reports_read == link->stats().delivered;
   }
-  std::vector<GloveLinkState> state_log() {
+  std::vector<hid::LinkState> state_log() {
     std::lock_guard lock(states_mutex);
     return states;
   }
 
-  std::shared_ptr<FakeHidLink> link;
+  std::shared_ptr<hid::FakeHidLink> link;
   std::mutex emulator_mutex;
-  GloveEmulator emulator;
-  GloveDevice device;
+  ImuGloveEmulator emulator;
+  ImuGloveDevice device;
   std::atomic<TimeNs> t0{0};  // the emulator's time zero; read by the feature handler on the reader thread
   TimeNs last_release = 0;
-  std::vector<GloveSample> samples;
+  std::vector<ImuGloveSample> samples;
   std::mutex states_mutex;
-  std::vector<GloveLinkState> states;
+  std::vector<hid::LinkState> states;
 };
 
 // For failure messages: what the device and the link saw.
-std::string describe(const GloveDeviceStats& st, const FakeHidLink& link) {
+std::string describe(const ImuGloveDeviceStats& st, const hid::FakeHidLink& link) {
   const auto l = link.stats();
   return "device: reports read " + std::to_string(st.reports_read) + ", accepted " +
          std::to_string(st.stream.accepted) + ", lost " + std::to_string(st.stream.lost) + ", duplicates " +
@@ -379,9 +379,9 @@ std::string describe(const GloveDeviceStats& st, const FakeHidLink& link) {
 }
 
 // The tick a sample belongs to, from the value synthetic_tick put in it.
-std::int64_t tick_of(const GloveSample& s) { return std::llround(s.imu.accel_mps2.y() / 0.05); }
+std::int64_t tick_of(const ImuGloveSample& s) { return std::llround(s.imu.accel_mps2.y() / 0.05); }
 
-void expect_matches_synthetic(const GloveSample& s) {
+void expect_matches_synthetic(const ImuGloveSample& s) {
   const auto k = tick_of(s);
   const ImuSample truth = synthetic_tick(k)[s.imu.sensor_id];
   const double qa = 0.5 / accel_counts_per_mps2(AccelRange::g16) + 1e-12;
@@ -392,9 +392,9 @@ void expect_matches_synthetic(const GloveSample& s) {
 
 // Every IMU's sample times strictly increase; every time is at or before the
 // report's arrival (the envelope runs below every receive time).
-void expect_sane_times(const std::vector<GloveSample>& samples) {
+void expect_sane_times(const std::vector<ImuGloveSample>& samples) {
   std::map<std::uint16_t, TimeNs> last;
-  for (const GloveSample& s : samples) {
+  for (const ImuGloveSample& s : samples) {
     EXPECT_LE(s.time_ns, s.receive_ns);
     EXPECT_LT(s.receive_ns - s.time_ns, kNsPerSecond);
     auto it = last.find(s.imu.sensor_id);
@@ -414,7 +414,7 @@ TEST(GloveDevice, StreamsDecodedTimestampedSamples) {
   rig.device.stop();
   EXPECT_EQ(rig.samples.size(), 700u);
   std::map<std::uint16_t, int> per_imu;
-  for (const GloveSample& s : rig.samples) {
+  for (const ImuGloveSample& s : rig.samples) {
     ++per_imu[s.imu.sensor_id];
     expect_matches_synthetic(s);
     EXPECT_EQ(s.status, 0);
@@ -422,8 +422,8 @@ TEST(GloveDevice, StreamsDecodedTimestampedSamples) {
   }
   for (std::uint16_t i = 0; i < 7; ++i) EXPECT_EQ(per_imu[i], 100) << i;
   expect_sane_times(rig.samples);
-  const GloveDeviceStats st = rig.device.stats();
-  EXPECT_EQ(st.state, GloveLinkState::stopped);
+  const ImuGloveDeviceStats st = rig.device.stats();
+  EXPECT_EQ(st.state, hid::LinkState::stopped);
   EXPECT_EQ(st.stream.accepted, 200u);
   EXPECT_EQ(st.stream.lost, 0u);
   EXPECT_EQ(st.samples_delivered, 700u);
@@ -432,13 +432,13 @@ TEST(GloveDevice, StreamsDecodedTimestampedSamples) {
   EXPECT_TRUE(st.have_info);
   EXPECT_EQ(st.info.imu_count, 7);
   EXPECT_EQ(st.info.rate_hz, 100);
-  EXPECT_EQ(rig.state_log(), (std::vector<GloveLinkState>{GloveLinkState::connecting, GloveLinkState::streaming,
-                                                          GloveLinkState::stopped}));
+  EXPECT_EQ(rig.state_log(), (std::vector<hid::LinkState>{hid::LinkState::connecting, hid::LinkState::streaming,
+                                                          hid::LinkState::stopped}));
   EXPECT_TRUE(rig.link->writes().empty());  // a streaming glove is left alone
 }
 
 TEST(GloveDevice, ResumesAfterUnplugAndReplug) {
-  GloveEmulatorOptions eo;
+  ImuGloveEmulatorOptions eo;
   // The glove loses power 0.5 s in for 0.3 s and boots again: counter and sequence restart.
   eo.faults.unplugs.push_back({500 * kNsPerMillisecond, 300 * kNsPerMillisecond});
   eo.boot_timestamp_us = 4'000'000'000u;
@@ -448,12 +448,12 @@ TEST(GloveDevice, ResumesAfterUnplugAndReplug) {
   rig.link->schedule_unplug(rig.t0 + 500 * kNsPerMillisecond, 300 * kNsPerMillisecond);
   // Ticks 0-49 and 80-149 were powered.
   const bool done = rig.drain_until([&] { return rig.samples.size() >= 7 * 120 && rig.all_read(); });
-  const GloveDeviceStats st = rig.device.stats();
+  const ImuGloveDeviceStats st = rig.device.stats();
   ASSERT_TRUE(done) << rig.samples.size() << " samples; " << describe(st, *rig.link);
   rig.device.stop();
   EXPECT_EQ(rig.samples.size(), 7u * 120u);
   std::size_t after = 0;
-  for (const GloveSample& s : rig.samples) {
+  for (const ImuGloveSample& s : rig.samples) {
     expect_matches_synthetic(s);
     const auto k = tick_of(s);
     EXPECT_TRUE(k < 50 || k >= 80) << k;
@@ -472,38 +472,38 @@ TEST(GloveDevice, ResumesAfterUnplugAndReplug) {
   EXPECT_EQ(st.stream.lost, 0u);
   EXPECT_GE(st.clock_relocks, 1u);
   const auto log = rig.state_log();
-  const auto pos = std::find(log.begin(), log.end(), GloveLinkState::disconnected);
+  const auto pos = std::find(log.begin(), log.end(), hid::LinkState::disconnected);
   ASSERT_NE(pos, log.end());
-  EXPECT_NE(std::find(pos, log.end(), GloveLinkState::streaming), log.end());
+  EXPECT_NE(std::find(pos, log.end(), hid::LinkState::streaming), log.end());
 }
 
 TEST(GloveDevice, CorruptedReportsAreSkippedAndCounted) {
-  FakeHidFaults faults;
+  hid::FakeHidFaults faults;
   faults.corrupt_probability = 0.1;
   faults.seed = 4;
   Rig rig({}, faults);
   ASSERT_TRUE(rig.device.start().ok());
   rig.schedule(150);
   ASSERT_TRUE(rig.drain_until([&] { return rig.all_read(); }));
-  const GloveDeviceStats st = rig.device.stats();
+  const ImuGloveDeviceStats st = rig.device.stats();
   rig.device.stop();
   const auto link = rig.link->stats();
   ASSERT_GT(link.corrupted, 5u);
   EXPECT_EQ(st.stream.decode_errors, link.corrupted);  // one flipped bit never gets past the CRC
-  EXPECT_EQ(st.stream.decode_errors_by_code[static_cast<std::size_t>(GloveDecodeErrc::crc_mismatch)] +
-                st.stream.decode_errors_by_code[static_cast<std::size_t>(GloveDecodeErrc::unknown_report_id)] +
-                st.stream.decode_errors_by_code[static_cast<std::size_t>(GloveDecodeErrc::unsupported_version)],
+  EXPECT_EQ(st.stream.decode_errors_by_code[static_cast<std::size_t>(ImuGloveDecodeErrc::crc_mismatch)] +
+                st.stream.decode_errors_by_code[static_cast<std::size_t>(ImuGloveDecodeErrc::unknown_report_id)] +
+                st.stream.decode_errors_by_code[static_cast<std::size_t>(ImuGloveDecodeErrc::unsupported_version)],
             link.corrupted);
   EXPECT_EQ(st.stream.accepted, 300u - link.corrupted);
   EXPECT_LE(st.stream.lost, link.corrupted);  // a corrupted last report is not known lost yet
   EXPECT_GE(st.stream.lost + 2, link.corrupted);
-  for (const GloveSample& s : rig.samples) expect_matches_synthetic(s);
+  for (const ImuGloveSample& s : rig.samples) expect_matches_synthetic(s);
   expect_sane_times(rig.samples);
   EXPECT_EQ(st.samples_delivered, rig.samples.size());
 }
 
 TEST(GloveDevice, LostDuplicatedAndReorderedReportsAreAccountedFor) {
-  FakeHidFaults faults;
+  hid::FakeHidFaults faults;
   faults.drop_probability = 0.05;
   faults.duplicate_probability = 0.05;
   faults.reorder_probability = 0.05;
@@ -512,7 +512,7 @@ TEST(GloveDevice, LostDuplicatedAndReorderedReportsAreAccountedFor) {
   ASSERT_TRUE(rig.device.start().ok());
   rig.schedule(150);
   ASSERT_TRUE(rig.drain_until([&] { return rig.all_read(); }));
-  const GloveDeviceStats st = rig.device.stats();
+  const ImuGloveDeviceStats st = rig.device.stats();
   rig.device.stop();
   const auto link = rig.link->stats();
   ASSERT_GT(link.dropped, 0u);
@@ -527,7 +527,7 @@ TEST(GloveDevice, LostDuplicatedAndReorderedReportsAreAccountedFor) {
   EXPECT_LE(st.stream.lost, link.dropped);
   EXPECT_GE(st.stream.lost + 2, link.dropped);
   EXPECT_EQ(st.samples_delivered, rig.samples.size());
-  for (const GloveSample& s : rig.samples) expect_matches_synthetic(s);
+  for (const ImuGloveSample& s : rig.samples) expect_matches_synthetic(s);
   expect_sane_times(rig.samples);
 }
 
@@ -536,22 +536,22 @@ TEST(GloveDevice, WaitsForAGloveThatIsNotThereYet) {
   rig.link->unplug_for(150 * kNsPerMillisecond);
   ASSERT_TRUE(rig.device.start().ok());
   ASSERT_TRUE(wait_until([&] { return rig.device.stats().open_failures >= 1; }));
-  ASSERT_TRUE(wait_until([&] { return rig.device.state() == GloveLinkState::streaming; }));
+  ASSERT_TRUE(wait_until([&] { return rig.device.state() == hid::LinkState::streaming; }));
   rig.schedule(20);
   ASSERT_TRUE(rig.drain_until([&] { return rig.samples.size() >= 140 && rig.all_read(); }));
   rig.device.stop();
   EXPECT_EQ(rig.samples.size(), 140u);
   const auto log = rig.state_log();
   ASSERT_GE(log.size(), 3u);
-  EXPECT_EQ(log[0], GloveLinkState::connecting);
-  EXPECT_EQ(log[1], GloveLinkState::disconnected);
-  EXPECT_EQ(log[2], GloveLinkState::streaming);
+  EXPECT_EQ(log[0], hid::LinkState::connecting);
+  EXPECT_EQ(log[1], hid::LinkState::disconnected);
+  EXPECT_EQ(log[2], hid::LinkState::streaming);
 }
 
 TEST(GloveDevice, SendsStartWhenTheGloveStaysSilent) {
-  GloveEmulatorOptions eo;
+  ImuGloveEmulatorOptions eo;
   eo.stream_on_boot = false;  // e.g. another program stopped it
-  GloveDeviceOptions o = Rig::test_options();
+  ImuGloveDeviceOptions o = Rig::test_options();
   o.restart_after_silence_ns = 100 * kNsPerMillisecond;
   Rig rig(eo, {}, o);
   ASSERT_TRUE(rig.device.start().ok());
@@ -561,7 +561,7 @@ TEST(GloveDevice, SendsStartWhenTheGloveStaysSilent) {
   const auto writes = rig.link->writes();
   auto cmd = decode_command(writes.front());
   ASSERT_TRUE(cmd.ok()) << cmd.error().message;
-  EXPECT_EQ(cmd->op, GloveCommandOp::start_streaming);
+  EXPECT_EQ(cmd->op, ImuGloveCommandOp::start_streaming);
   EXPECT_GE(rig.device.stats().restart_commands, 1u);
   std::lock_guard lock(rig.emulator_mutex);
   EXPECT_TRUE(rig.emulator.streaming());
@@ -570,8 +570,8 @@ TEST(GloveDevice, SendsStartWhenTheGloveStaysSilent) {
 TEST(GloveDevice, QueuedCommandsAreSent) {
   Rig rig;
   ASSERT_TRUE(rig.device.start().ok());
-  GloveCommand c;
-  c.op = GloveCommandOp::set_rate;
+  ImuGloveCommand c;
+  c.op = ImuGloveCommandOp::set_rate;
   c.rate_hz = 250;
   c.token = 9;
   rig.device.send_command(c);
@@ -587,13 +587,13 @@ TEST(GloveDevice, QueuedCommandsAreSent) {
 TEST(GloveDevice, FlaggedSamplesAreRejectedAndCountedUnlessAsked) {
   for (bool deliver_flagged : {false, true}) {
     SCOPED_TRACE(deliver_flagged ? "deliver_flagged" : "default");
-    GloveDeviceOptions o = Rig::test_options();
+    ImuGloveDeviceOptions o = Rig::test_options();
     o.deliver_flagged = deliver_flagged;
     Rig rig({}, {}, o);
     ASSERT_TRUE(rig.device.start().ok());
     // Schedule by hand: IMU 2 reads NaN on even ticks, IMU 5's gyro is far past full scale on every third.
     rig.t0 = MonotonicClock::instance().now_ns() + 30 * kNsPerMillisecond;
-    std::vector<GloveEmulatedReport> out;
+    std::vector<ImuGloveEmulatedReport> out;
     for (std::int64_t k = 0; k < 30; ++k) {
       auto tick = synthetic_tick(k);
       if (k % 2 == 0) tick[2].accel_mps2.x() = std::nan("");
@@ -605,7 +605,7 @@ TEST(GloveDevice, FlaggedSamplesAreRejectedAndCountedUnlessAsked) {
     }
     rig.last_release = rig.t0 + 300 * kNsPerMillisecond;
     ASSERT_TRUE(rig.drain_until([&] { return rig.all_read() && rig.samples.size() >= (deliver_flagged ? 210u : 185u); }));
-    const GloveDeviceStats st = rig.device.stats();
+    const ImuGloveDeviceStats st = rig.device.stats();
     rig.device.stop();
     EXPECT_EQ(st.stream.imus[2].sensor_error, 15u);
     EXPECT_EQ(st.stream.imus[5].gyro_saturated, 10u);
@@ -614,12 +614,12 @@ TEST(GloveDevice, FlaggedSamplesAreRejectedAndCountedUnlessAsked) {
       EXPECT_EQ(rig.samples.size(), 210u);
       EXPECT_EQ(st.samples_rejected, 0u);
       std::size_t flagged = 0;
-      for (const GloveSample& s : rig.samples) flagged += s.status != 0;
+      for (const ImuGloveSample& s : rig.samples) flagged += s.status != 0;
       EXPECT_EQ(flagged, 25u);
     } else {
       EXPECT_EQ(rig.samples.size(), 185u);
       EXPECT_EQ(st.samples_rejected, 25u);
-      for (const GloveSample& s : rig.samples) {
+      for (const ImuGloveSample& s : rig.samples) {
         EXPECT_EQ(s.status, 0);
         expect_matches_synthetic(s);
       }
@@ -628,17 +628,17 @@ TEST(GloveDevice, FlaggedSamplesAreRejectedAndCountedUnlessAsked) {
 }
 
 TEST(GloveDevice, ASlowConsumerLosesSamplesAtTheRingNotTheReader) {
-  GloveDeviceOptions o = Rig::test_options();
+  ImuGloveDeviceOptions o = Rig::test_options();
   o.queue_capacity = 16;
   Rig rig({}, {}, o);
   ASSERT_TRUE(rig.device.start().ok());
   rig.schedule(20);
   ASSERT_TRUE(wait_until([&] { return rig.all_read(); }));  // nobody pops meanwhile
-  const GloveDeviceStats st = rig.device.stats();
+  const ImuGloveDeviceStats st = rig.device.stats();
   EXPECT_EQ(st.samples_delivered, 16u);
   EXPECT_EQ(st.queue_overruns, 140u - 16u);
   EXPECT_EQ(st.stream.accepted, 40u);
-  GloveSample s;
+  ImuGloveSample s;
   int popped = 0;
   while (rig.device.pop(s)) ++popped;
   EXPECT_EQ(popped, 16);
@@ -648,8 +648,8 @@ TEST(GloveDevice, ASlowConsumerLosesSamplesAtTheRingNotTheReader) {
 TEST(GloveDevice, SampleCallbackReplacesTheRing) {
   Rig rig;
   std::mutex m;
-  std::vector<GloveSample> got;
-  rig.device.set_sample_callback([&](const GloveSample& s) {
+  std::vector<ImuGloveSample> got;
+  rig.device.set_sample_callback([&](const ImuGloveSample& s) {
     std::lock_guard lock(m);
     got.push_back(s);
   });
@@ -661,7 +661,7 @@ TEST(GloveDevice, SampleCallbackReplacesTheRing) {
     return got.size() >= 70;
   }));
   rig.device.stop();
-  GloveSample s;
+  ImuGloveSample s;
   EXPECT_FALSE(rig.device.pop(s));
   std::lock_guard lock(m);
   EXPECT_EQ(got.size(), 70u);
@@ -674,7 +674,7 @@ TEST(GloveDevice, StopsPromptlyWhileRetryingAndCanRestart) {
   ASSERT_TRUE(wait_until([&] { return rig.device.stats().open_failures >= 3; }));
   rig.device.stop();
   EXPECT_FALSE(rig.device.running());
-  EXPECT_EQ(rig.device.state(), GloveLinkState::stopped);
+  EXPECT_EQ(rig.device.state(), hid::LinkState::stopped);
   ASSERT_TRUE(rig.device.start().ok());
   EXPECT_TRUE(rig.device.running());
   rig.device.stop();

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
@@ -549,7 +549,7 @@ TEST(ImuSimRecording, WritesOneStreamPerImu) {
 TEST(ImuSimGlove, VistGlovePlacementAtRest) {
   // The thesis's glove as the description places it on a subject's hand.
   const HandShape shape = *sim_subject(3)->shape();
-  const auto imus = GloveDescription::vist_default().place_imus(shape, Handedness::right);
+  const auto imus = ImuGloveDescription::vist_default().place_imus(shape, Handedness::right);
   ASSERT_EQ(imus.size(), 7u);
   HandMotionOptions mo;
   HandMotionGenerator gen{HandModel(shape), mo};
@@ -570,7 +570,7 @@ TEST(ImuSimGlove, LeftHandGyroMatchesTheGenerator) {
   mo.seed = 2;
   HandMotionGenerator gen{HandModel(shape), mo};
   HandMotionGenerator reference{HandModel(shape), mo};
-  auto sim = ImuSimulator::create(gen, GloveDescription::vist_default().place_imus(shape, Handedness::left),
+  auto sim = ImuSimulator::create(gen, ImuGloveDescription::vist_default().place_imus(shape, Handedness::left),
                                   ImuNoiseOptions::ideal(), 1, 3 * kNsPerSecond);
   ASSERT_TRUE(sim.ok());
   for (int k = 0; k < 100; ++k) {

@@ -15,7 +15,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/stereo_image_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/marker_detection.hpp"
@@ -50,7 +50,7 @@ void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
 namespace {
 
 const PinholeCamera& camera() {
-  static const PinholeCamera cam = GloveDescription::vist_default().rig.camera;
+  static const PinholeCamera cam = ImuGloveDescription::vist_default().rig.camera;
   return cam;
 }
 
@@ -328,7 +328,7 @@ struct RenderedSession {
 // the given image options.
 RenderedSession render_session(const sim::StereoImageSimOptions& o, std::uint64_t motion_seed, int frames) {
   const HandShape shape = *sim::sim_subject(3)->shape();
-  auto simulator = sim::StereoImageSimulator::create(GloveDescription::vist_default(), shape, o);
+  auto simulator = sim::StereoImageSimulator::create(ImuGloveDescription::vist_default(), shape, o);
   EXPECT_TRUE(simulator.ok());
   sim::HandMotionOptions ho;
   ho.seed = motion_seed;
@@ -539,7 +539,7 @@ TEST(MarkerDetectionOnImages, CoarseStepOneFindsTheSameMarkers) {
 TEST(MarkerDetectionOnImages, StereoMatcherTriangulatesDetectionsNearTheTruth) {
   const RenderedSession& s = default_session();
   MarkerDetector d = make_detector();
-  const StereoRig& rig = GloveDescription::vist_default().rig;
+  const StereoRig& rig = ImuGloveDescription::vist_default().rig;
   StereoMatchOptions mo;
   mo.pixel_noise_px = 0.3;  // about the detector's centroid error
   auto matcher = StereoMatcher::create(rig, mo);

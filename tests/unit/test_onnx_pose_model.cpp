@@ -20,11 +20,11 @@
 #include <string>
 #include <vector>
 
-#include "proprio/glove/onnx_pose_model.hpp"
+#include "proprio/stretch_glove/onnx_pose_model.hpp"
 #include "support/temp_dir.hpp"
 #include "support/text.hpp"
 
-namespace proprio::glove {
+namespace proprio::stretch_glove {
 namespace {
 
 namespace fs = std::filesystem;
@@ -361,4 +361,4 @@ TEST(OnnxPoseModelAgreement, RepeatedInferenceIsStable) {
 }
 
 }  // namespace
-}  // namespace proprio::glove
+}  // namespace proprio::stretch_glove

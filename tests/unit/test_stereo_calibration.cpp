@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/vist/stereo_calibration.hpp"
 #include "support/temp_dir.hpp"
@@ -582,10 +582,10 @@ TEST(StereoCalibration, RigTomlSnippetParsesAsTheGloveFileRig) {
   EXPECT_TRUE(contains(snippet, "fx_px = ")) << snippet;
   EXPECT_TRUE(contains(snippet, "left_camera_tilt_down_deg = 25")) << snippet;
   // Put it in place of the default glove's [rig] table.
-  const std::string glove = GloveDescription::vist_default().to_toml();
+  const std::string glove = ImuGloveDescription::vist_default().to_toml();
   const auto at = glove.find("\n[rig]\n");
   ASSERT_NE(at, std::string::npos);
-  auto parsed = GloveDescription::parse(glove.substr(0, at + 1) + snippet, "calibrated.toml");
+  auto parsed = ImuGloveDescription::parse(glove.substr(0, at + 1) + snippet, "calibrated.toml");
   ASSERT_TRUE(parsed.ok()) << parsed.error().message << "\n" << snippet;
   const StereoRig& got = parsed->rig;
   EXPECT_EQ(got.camera.width_px, 1280);

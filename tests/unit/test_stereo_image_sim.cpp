@@ -10,7 +10,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/stereo_image_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "support/stereo.hpp"
@@ -32,7 +32,7 @@ StereoImageSimOptions clean_options() {
 }
 
 StereoImageSimulator make_sim(const StereoImageSimOptions& o, int subject = 3) {
-  auto sim = StereoImageSimulator::create(GloveDescription::vist_default(), subject_shape(subject), o);
+  auto sim = StereoImageSimulator::create(ImuGloveDescription::vist_default(), subject_shape(subject), o);
   EXPECT_TRUE(sim.ok()) << (sim.ok() ? "" : sim.error().message);
   return std::move(*sim);
 }
@@ -95,14 +95,14 @@ TEST(StereoImageSimOptions, RejectsBadValuesWithAMessage) {
 
   StereoImageSimOptions bad;
   bad.exposure_jitter = 0.9;
-  auto sim = StereoImageSimulator::create(GloveDescription::vist_default(), subject_shape(), bad);
+  auto sim = StereoImageSimulator::create(ImuGloveDescription::vist_default(), subject_shape(), bad);
   ASSERT_FALSE(sim.ok());
   EXPECT_NE(sim.error().message.find("exposure_jitter"), std::string::npos);
 
   // A marker simulator with centroid noise cannot be wrapped.
   StereoSimOptions noisy;
   noisy.pixel_noise_px = 0.3;
-  auto markers = StereoMarkerSimulator::create(GloveDescription::vist_default(), subject_shape(), noisy);
+  auto markers = StereoMarkerSimulator::create(ImuGloveDescription::vist_default(), subject_shape(), noisy);
   ASSERT_TRUE(markers.ok());
   auto wrapped = StereoImageSimulator::create(std::move(*markers), StereoImageSimOptions{});
   ASSERT_FALSE(wrapped.ok());

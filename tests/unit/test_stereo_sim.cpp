@@ -5,7 +5,7 @@
 #include <iostream>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/sim/stereo_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "support/temp_dir.hpp"
@@ -510,7 +510,7 @@ TEST(StereoSimOptions, ValidateAndDescribe) {
   o = {};
   o.min_depth_m = 0.0;
   EXPECT_FALSE(o.validate().ok());
-  GloveDescription g = GloveDescription::vist_default();
+  ImuGloveDescription g = ImuGloveDescription::vist_default();
   g.rig.baseline_m = 0.0;
   auto r = StereoMarkerSimulator::create(g, subject_shape(), {});
   ASSERT_FALSE(r.ok());
@@ -518,7 +518,7 @@ TEST(StereoSimOptions, ValidateAndDescribe) {
 }
 
 TEST(StereoSimSession, FreeMotionWithTheDefaultGloveSeesASensibleShare) {
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   ASSERT_EQ(glove.markers.size(), 37u);
   for (Handedness hand : {Handedness::right, Handedness::left}) {
     const HandShape shape = subject_shape(3);
@@ -614,7 +614,7 @@ TEST(StereoSimSession, WritesARecordingTheReaderUnderstands) {
 TEST(StereoSimGlove, MarkersPlacedForTheLeftHandMatchTheRuntimeMirror) {
   // One simulator with right-hand markers mirrors them for a left pose; one
   // with markers placed for the left hand uses them as they are. Same frames.
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   const HandShape shape = subject_shape(5);
   StereoSimOptions o;
   o.seed = 3;

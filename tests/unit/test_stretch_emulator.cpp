@@ -20,11 +20,11 @@
 #include <thread>
 #include <vector>
 
-#include "proprio/devices/hid_transport.hpp"
-#include "proprio/devices/stretch_device.hpp"
-#include "proprio/devices/stretch_emulator.hpp"
-#include "proprio/devices/stretch_protocol.hpp"
-#include "proprio/devices/stretch_stream.hpp"
+#include "proprio/hid/hid_transport.hpp"
+#include "proprio/stretch_board/stretch_device.hpp"
+#include "proprio/stretch_board/stretch_emulator.hpp"
+#include "proprio/stretch_board/stretch_protocol.hpp"
+#include "proprio/stretch_board/stretch_stream.hpp"
 #include "support/devices.hpp"
 
 // A namespace of this file's own: its helpers share names with the glove
@@ -385,7 +385,7 @@ TEST(StretchEmulator, AnswersCommandsAsTheFirmwareDoes) {
   const auto start_bytes = encode_stretch_command(c);
   Bytes unknown(start_bytes.begin(), start_bytes.end());
   unknown[2] = 0x77;
-  const std::uint16_t crc = crc16_ccitt(std::span(unknown).first(14));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span(unknown).first(14));
   unknown[14] = static_cast<std::uint8_t>(crc);
   unknown[15] = static_cast<std::uint8_t>(crc >> 8);
   EXPECT_EQ(emu.handle_command(unknown, 0), StretchCommandResult::unknown_command);
@@ -440,11 +440,11 @@ StretchDeviceOptions test_options() {
 }
 
 struct BoardRig {
-  explicit BoardRig(StretchEmulatorOptions eo = {}, FakeHidFaults faults = {},
+  explicit BoardRig(StretchEmulatorOptions eo = {}, hid::FakeHidFaults faults = {},
                     StretchDeviceOptions dopts = test_options(), StretchCapacitanceProvider p = synthetic_pf)
-      : link(std::make_shared<FakeHidLink>(MonotonicClock::instance(), faults)),
+      : link(std::make_shared<hid::FakeHidLink>(MonotonicClock::instance(), faults)),
         server(make(eo, std::move(p)), link),
-        device(std::make_unique<FakeHidTransport>(link), dopts) {
+        device(std::make_unique<hid::FakeHidTransport>(link), dopts) {
     device.set_state_callback([this](StretchLinkState s, std::string_view detail) {
       std::lock_guard lock(states_mutex);
       states.push_back(s);
@@ -480,7 +480,7 @@ struct BoardRig {
     return states;
   }
 
-  std::shared_ptr<FakeHidLink> link;
+  std::shared_ptr<hid::FakeHidLink> link;
   StretchEmulatorServer server;
   StretchDevice device;
   std::vector<StretchSample> samples;
@@ -588,7 +588,7 @@ TEST(StretchDevice, ResumesAfterUnplugAndReplug) {
 }
 
 TEST(StretchDevice, CorruptedAndLostReportsAreSkippedAndAccountedFor) {
-  FakeHidFaults faults;
+  hid::FakeHidFaults faults;
   faults.corrupt_probability = 0.08;
   faults.drop_probability = 0.08;
   faults.seed = 4;

@@ -7,7 +7,7 @@
 #include <set>
 #include <sstream>
 
-#include "proprio/core/stretch_glove_layout.hpp"
+#include "proprio/glove_descriptions/stretch_glove_layout.hpp"
 
 namespace proprio {
 namespace {

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "proprio/core/random.hpp"
-#include "proprio/devices/stretch_protocol.hpp"
-#include "proprio/devices/stretch_stream.hpp"
+#include "proprio/stretch_board/stretch_protocol.hpp"
+#include "proprio/stretch_board/stretch_stream.hpp"
 #include "support/devices.hpp"
 
 // A namespace of this file's own: its helpers share names with the glove
@@ -31,7 +31,7 @@ std::uint32_t le32(const Bytes& b, std::size_t at) {
 
 // Recomputes the CRC after a test edited the bytes, so the edit reaches the field checks.
 void fix_crc(Bytes& b) {
-  const std::uint16_t crc = crc16_ccitt(std::span(b).first(b.size() - 2));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span(b).first(b.size() - 2));
   b[b.size() - 2] = static_cast<std::uint8_t>(crc);
   b[b.size() - 1] = static_cast<std::uint8_t>(crc >> 8);
 }
@@ -86,7 +86,7 @@ TEST(StretchProtocol, DataReportBytesFollowTheDocumentedLayout) {
   const std::uint8_t m0[4] = {0xB5, 0xB0, 0xE9, 0x04};  // 181 + (20123 << 12) = 0x04E9B0B5
   EXPECT_EQ(0, std::memcmp(&b[14], m0, 4));
   for (std::size_t i = 26; i < 62; ++i) EXPECT_EQ(b[i], 0) << i;  // slots past count are zero
-  const std::uint16_t crc = crc16_ccitt(std::span(b).first(62));
+  const std::uint16_t crc = hid::crc16_ccitt(std::span(b).first(62));
   EXPECT_EQ(b[62], crc & 0xFF);
   EXPECT_EQ(b[63], crc >> 8);
 }
@@ -221,7 +221,7 @@ TEST(StretchProtocolErrors, CrcMismatchCarriesBothValues) {
   const auto s = decode_stretch_data_report(b, out);
   ASSERT_EQ(s.code, StretchDecodeErrc::crc_mismatch);
   EXPECT_EQ(s.expected, static_cast<std::uint32_t>(b[62] | b[63] << 8));
-  EXPECT_EQ(s.actual, crc16_ccitt(std::span(b).first(62)));
+  EXPECT_EQ(s.actual, hid::crc16_ccitt(std::span(b).first(62)));
   EXPECT_NE(s.expected, s.actual);
   auto result = decode_stretch_data_report(b);
   ASSERT_FALSE(result.ok());

@@ -9,7 +9,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/sim/hand_motion.hpp"
@@ -249,7 +249,7 @@ struct Perturbation {
 
 SessionStats run_session(const CorrespondenceOptions& options, double duration_s = 30.0, int distractors = 0,
                          std::uint64_t seed = 11, Perturbation err = {}) {
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   const HandShape shape = *sim::sim_subject(3)->shape();
   sim::StereoSimOptions so;
   so.facing = sim::FacingModel::linear_ramp;  // the thesis's own visibility model (4.10)

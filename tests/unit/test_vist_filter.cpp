@@ -154,7 +154,7 @@ TEST(VistFilterConventions, TransitionIsTheJacobianOfTheNominalStep) {
 
 VistModel thesis_model() {
   auto shape = HandShape::from_measurements(0.19, 0.10);
-  auto m = VistModel::build(GloveDescription::vist_default(), *shape, Handedness::right);
+  auto m = VistModel::build(ImuGloveDescription::vist_default(), *shape, Handedness::right);
   EXPECT_TRUE(m) << m.error().message;
   return *m;
 }
@@ -169,7 +169,7 @@ TEST(VistModel, ThesisGloveHasTheThesisConstraints) {
 }
 
 TEST(VistModel, RejectsAMarkerOnASegmentWithoutAnImu) {
-  GloveDescription g = GloveDescription::vist_default();
+  ImuGloveDescription g = ImuGloveDescription::vist_default();
   MarkerSpec extra;
   extra.segment = HandJoint::ring_proximal;
   g.markers.push_back(extra);

@@ -1,6 +1,6 @@
 // VIST live, end to end without hardware: a simulated subject's IMU readings
 // go through the glove firmware emulator and the fake USB link to
-// GloveDevice (decoding, clock alignment); rendered stereo images of the
+// ImuGloveDevice (decoding, clock alignment); rendered stereo images of the
 // same subject go through a side-by-side MJPG video file, StereoCamera and
 // the OpenCV marker detector. VistLiveInput wires both into a VistHandSource
 // in real time, and the tracked hand is scored against the simulator's truth.
@@ -13,8 +13,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "proprio/devices/glove_emulator.hpp"
-#include "proprio/devices/hid_transport.hpp"
+#include "proprio/imu_glove_board/imu_glove_emulator.hpp"
+#include "proprio/hid/hid_transport.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/stereo_image_sim.hpp"
@@ -37,7 +37,7 @@ sim::HandMotionOptions motion_options() {
 }
 
 struct LiveRig {
-  GloveDescription glove = GloveDescription::vist_default();
+  ImuGloveDescription glove = ImuGloveDescription::vist_default();
   HandShape shape = *sim::sim_subject(3)->shape();
   std::filesystem::path dir = std::filesystem::temp_directory_path() /
                               ("proprio_vist_live_" + std::to_string(::getpid()));
@@ -75,18 +75,18 @@ struct LiveRig {
 
   // The subject's IMU readings as the firmware sends them, released on the
   // link in real time from t0 on (0.2-1 ms of USB latency).
-  void schedule_imu(devices::FakeHidLink& link, TimeNs t0) {
+  void schedule_imu(hid::FakeHidLink& link, TimeNs t0) {
     sim::HandMotionGenerator motion(HandModel(shape), motion_options());
     auto imu = sim::ImuSimulator::create(motion, glove.place_imus(shape, Handedness::right), sim::ImuNoiseOptions{},
                                          7);
     ASSERT_TRUE(imu) << imu.error().message;
-    devices::GloveEmulatorOptions eo;
+    devices::ImuGloveEmulatorOptions eo;
     eo.imu_count = static_cast<std::uint8_t>(imu->imu_count());
     eo.clock_error_ppm = 40.0;  // a real crystal's error, which the clock alignment must absorb
-    auto emulator = devices::GloveEmulator::create(eo);
+    auto emulator = devices::ImuGloveEmulator::create(eo);
     ASSERT_TRUE(emulator) << emulator.error().message;
     Rng latency(3);
-    std::vector<devices::GloveEmulatedReport> reports;
+    std::vector<devices::ImuGloveEmulatedReport> reports;
     std::vector<ImuSample> samples;
     while (imu->next_nominal_time_ns() <= seconds_to_ns(kSeconds)) {
       const TimeNs t = imu->next_nominal_time_ns();
@@ -115,9 +115,9 @@ TEST(VistLive, HidGloveAndStereoVideoTrackASimulatedSubjectInRealTime) {
   // Everything starts at t0 on CLOCK_MONOTONIC: the video's first frame and
   // the glove's first tick.
   const TimeNs t0 = MonotonicClock::instance().now_ns() + 500 * kNsPerMillisecond;
-  auto link = std::make_shared<devices::FakeHidLink>();
+  auto link = std::make_shared<hid::FakeHidLink>();
   rig.schedule_imu(*link, t0);
-  auto glove = std::make_unique<devices::GloveDevice>(std::make_unique<devices::FakeHidTransport>(link));
+  auto glove = std::make_unique<devices::ImuGloveDevice>(std::make_unique<hid::FakeHidTransport>(link));
 
   StereoCameraOptions co;
   co.input = StereoInput::file;
@@ -190,9 +190,9 @@ TEST(VistLive, RefusesMissingDevicesAndAMismatchedCamera) {
   LiveRig rig;
   auto source = VistHandSource::create(rig.glove);
   ASSERT_TRUE(source);
-  auto link = std::make_shared<devices::FakeHidLink>();
+  auto link = std::make_shared<hid::FakeHidLink>();
   auto make_glove = [&] {
-    return std::make_unique<devices::GloveDevice>(std::make_unique<devices::FakeHidTransport>(link));
+    return std::make_unique<devices::ImuGloveDevice>(std::make_unique<hid::FakeHidTransport>(link));
   };
   // A small video whose size is not the rig's.
   const auto path = rig.dir / "small.avi";

@@ -33,7 +33,7 @@ const fs::path& recorded_session() {
     spec.warmup_s = 2.0;
     spec.record_path = p;
     spec.overwrite_record = true;
-    auto r = vist_eval::run_session(GloveDescription::vist_default(), spec);
+    auto r = vist_eval::run_session(ImuGloveDescription::vist_default(), spec);
     EXPECT_TRUE(r) << r.error().message;
     return p;
   }();
@@ -65,7 +65,7 @@ TEST(VistSession, ReplayReproducesTheLiveTrackerExactly) {
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_EQ(r->recording.end, RecordingEnd::clean);
   EXPECT_EQ(r->skipped_records, 0u);
-  EXPECT_EQ(r->info.glove.markers.size(), GloveDescription::vist_default().markers.size());
+  EXPECT_EQ(r->info.glove.markers.size(), ImuGloveDescription::vist_default().markers.size());
   ASSERT_TRUE(r->scored);
   EXPECT_LT(r->keypoints.mean_mm, 6.0);
   EXPECT_GT(r->stereo_frames, 200u);
@@ -142,7 +142,7 @@ TEST(VistHandSource, ServesTheSessionLiveWhileConsumersQueryIt) {
   // so nothing is dropped however slowly the worker runs (sanitizers, load).
   VistHandSourceOptions options;
   options.max_queued_inputs = 1u << 20;
-  auto source = VistHandSource::create(GloveDescription::vist_default(), options);
+  auto source = VistHandSource::create(ImuGloveDescription::vist_default(), options);
   ASSERT_TRUE(source) << source.error().message;
   ManualClock clock(1'000'000'000);
   VistSessionPlayerOptions po;
@@ -202,9 +202,9 @@ TEST(VistHandSource, ServesTheSessionLiveWhileConsumersQueryIt) {
 TEST(VistHandSource, ABoundedQueueDropsTheOldestInputWhenFlooded) {
   VistHandSourceOptions o;
   o.max_queued_inputs = 4;
-  EXPECT_FALSE(VistHandSource::create(GloveDescription::vist_default(), o));
+  EXPECT_FALSE(VistHandSource::create(ImuGloveDescription::vist_default(), o));
   o.max_queued_inputs = 16;
-  auto source = VistHandSource::create(GloveDescription::vist_default(), o);
+  auto source = VistHandSource::create(ImuGloveDescription::vist_default(), o);
   ASSERT_TRUE(source);
   TimedImuSample s;
   s.sample.accel_mps2 = Vec3(0, 0, 9.81);

@@ -8,7 +8,7 @@
 #include <set>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/stereo_sim.hpp"
@@ -227,7 +227,7 @@ struct SessionScore {
 // random column.
 SessionScore run_session(const StereoMatchOptions& mo, int distractors, std::uint64_t seed = 7) {
   const HandShape shape = *sim::sim_subject(3)->shape();
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   sim::StereoSimOptions so;
   so.pixel_noise_px = 0.3;
   so.seed = seed;
@@ -334,7 +334,7 @@ TEST(VistStereoSimulation, DistractorsInOneCameraAreRarelyMatched) {
 
 TEST(VistStereoSimulation, DeterministicAndAllocationFreeAfterWarmUp) {
   const HandShape shape = *sim::sim_subject(3)->shape();
-  const GloveDescription glove = GloveDescription::vist_default();
+  const ImuGloveDescription glove = ImuGloveDescription::vist_default();
   auto simulator = sim::StereoMarkerSimulator::create(glove, shape, {});
   ASSERT_TRUE(simulator.ok());
   sim::HandMotionGenerator gen(HandModel(shape), sim::HandMotionOptions{});

@@ -15,7 +15,7 @@ namespace proprio::vist {
 namespace {
 
 vist_eval::SessionResult run(vist_eval::SessionSpec spec) {
-  auto r = vist_eval::run_session(GloveDescription::vist_default(), spec);
+  auto r = vist_eval::run_session(ImuGloveDescription::vist_default(), spec);
   EXPECT_TRUE(r) << r.error().message;
   return r ? *r : vist_eval::SessionResult{};
 }
@@ -79,7 +79,7 @@ TEST(VistTracker, WithoutTheImuAblationItIsWorse) {
 class VistTrackerInput : public ::testing::Test {
  protected:
   void SetUp() override {
-    auto t = VistTracker::create(GloveDescription::vist_default());
+    auto t = VistTracker::create(ImuGloveDescription::vist_default());
     ASSERT_TRUE(t) << t.error().message;
     tracker_.emplace(std::move(*t));
   }
@@ -173,7 +173,7 @@ TEST(VistTrackerOptions, ValidateRejectsNonsense) {
   const auto st = o.validate();
   ASSERT_FALSE(st);
   EXPECT_NE(st.error().message.find("metres"), std::string::npos);
-  EXPECT_FALSE(VistTracker::create(GloveDescription::vist_default(), o));
+  EXPECT_FALSE(VistTracker::create(ImuGloveDescription::vist_default(), o));
 }
 
 }  // namespace

@@ -9,7 +9,7 @@
 
 #include "commands.hpp"
 #include "proprio/core/file_io.hpp"
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/vist/stereo_calibration.hpp"
 
@@ -55,7 +55,7 @@ int run_calibrate_stereo(const CalibrateStereoArgs& a) {
   // come from the user's glove file or stay the ZED Mini-like defaults.
   StereoRig mount = StereoRig::zed_mini_like();
   if (!a.glove.empty()) {
-    auto g = GloveDescription::load(a.glove);
+    auto g = ImuGloveDescription::load(a.glove);
     if (!g) return logger().error("--glove: {}", g.error().message), 1;
     mount = g->rig;
   }
@@ -113,8 +113,7 @@ int run_calibrate_stereo(const CalibrateStereoArgs& a) {
 }  // namespace
 
 void add_calibrate_command(CLI::App& app, int& exit_code) {
-  CLI::App* calibrate = subcommand_group(
-      app, "calibrate", "Calibrate sensors: 'calibrate stereo' for VIST's camera, 'calibrate glove' for the stretch glove");
+  CLI::App* calibrate = add_command(app, "calibrate");
 
   auto args = std::make_shared<CalibrateStereoArgs>();
   CLI::App* cmd = calibrate->add_subcommand(

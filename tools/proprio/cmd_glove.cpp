@@ -23,13 +23,14 @@
 #include "commands.hpp"
 #include "proprio/core/file_io.hpp"
 #include "progress.hpp"
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/log.hpp"
-#include "proprio/devices/glove_device.hpp"
-#include "proprio/devices/glove_emulator.hpp"
-#include "proprio/devices/glove_protocol.hpp"
-#include "proprio/devices/glove_stream.hpp"
-#include "proprio/devices/hid_transport.hpp"
+#include "proprio/imu_glove_board/imu_glove_device.hpp"
+#include "proprio/imu_glove_board/imu_glove_emulator.hpp"
+#include "proprio/imu_glove_board/imu_glove_protocol.hpp"
+#include "proprio/imu_glove_board/imu_glove_stream.hpp"
+#include "proprio/hid/capture_file.hpp"
+#include "proprio/hid/hid_transport.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/subjects.hpp"
@@ -46,18 +47,18 @@ using namespace proprio::devices;
 
 struct ListArgs {
   bool all = false;
-  std::string vid = hex4(kGloveUsbVendorId);
-  std::string pid = hex4(kGloveUsbProductId);
+  std::string vid = hex4(kImuGloveUsbVendorId);
+  std::string pid = hex4(kImuGloveUsbProductId);
 };
 
 int run_list(const ListArgs& a) {
   const std::uint16_t vid = a.all ? 0 : parse_hex_id(a.vid);
   const std::uint16_t pid = a.all ? 0 : parse_hex_id(a.pid);
-  auto devices = enumerate_hid_devices(vid, pid);
+  auto devices = hid::enumerate_hid_devices(vid, pid);
   if (!devices) return logger().error("{}", devices.error().message), 1;
   if (devices->empty()) {
     if (a.all) {
-      std::printf("no HID devices found (hidapi %s)\n", hidapi_version().c_str());
+      std::printf("no HID devices found (hidapi %s)\n", hid::hidapi_version().c_str());
     } else {
       std::printf("no glove found with VID:PID %s:%s; 'proprio glove list --all' lists every HID device\n",
                   hex4(vid).c_str(), hex4(pid).c_str());
@@ -65,9 +66,9 @@ int run_list(const ListArgs& a) {
     return 0;
   }
   std::printf("%-20s %-9s %-8s %-4s %-16s %s\n", "path", "vid:pid", "usage", "intf", "serial", "manufacturer / product");
-  for (const HidDeviceInfo& d : *devices) {
-    const bool glove = d.vendor_id == kGloveUsbVendorId && d.product_id == kGloveUsbProductId &&
-                       (d.usage_page == 0 || d.usage_page == kGloveHidUsagePage);
+  for (const hid::HidDeviceInfo& d : *devices) {
+    const bool glove = d.vendor_id == kImuGloveUsbVendorId && d.product_id == kImuGloveUsbProductId &&
+                       (d.usage_page == 0 || d.usage_page == kImuGloveHidUsagePage);
     std::printf("%-20s %s:%s %04x:%02x %-4d %-16s %s / %s%s\n", d.path.c_str(), hex4(d.vendor_id).c_str(),
                 hex4(d.product_id).c_str(), d.usage_page, d.usage, d.interface_number,
                 d.serial.empty() ? "-" : d.serial.c_str(), d.manufacturer.c_str(), d.product.c_str(),
@@ -80,8 +81,8 @@ int run_list(const ListArgs& a) {
 // monitor
 
 struct MonitorArgs {
-  std::string vid = hex4(kGloveUsbVendorId);
-  std::string pid = hex4(kGloveUsbProductId);
+  std::string vid = hex4(kImuGloveUsbVendorId);
+  std::string pid = hex4(kImuGloveUsbProductId);
   std::string serial;
   std::string path;
   double seconds = 0.0;
@@ -102,7 +103,7 @@ double percent(std::uint64_t part, std::uint64_t whole) {
 
 // The per-IMU table and totals both monitor modes end with. span_s: the
 // device time the samples cover (rates are per device second).
-void print_summary(const GloveStreamStats& s, double span_s, const std::array<LastValues, kGloveMaxImus>& last) {
+void print_summary(const ImuGloveStreamStats& s, double span_s, const std::array<LastValues, kImuGloveMaxImus>& last) {
   const std::uint64_t expected = s.accepted + s.late + s.lost;
   std::printf("\nreports: %llu read, %llu accepted, %llu lost (%.2f%%), %llu duplicate, %llu late, %llu undecodable",
               static_cast<unsigned long long>(s.reports), static_cast<unsigned long long>(s.accepted),
@@ -121,9 +122,9 @@ void print_summary(const GloveStreamStats& s, double span_s, const std::array<La
               static_cast<unsigned long long>(s.timestamp_wraps));
   if (s.decode_errors) {
     std::printf("undecodable by reason:");
-    for (std::size_t c = 1; c < kGloveDecodeErrcCount; ++c) {
+    for (std::size_t c = 1; c < kImuGloveDecodeErrcCount; ++c) {
       if (s.decode_errors_by_code[c]) {
-        std::printf(" %s %llu", to_string(static_cast<GloveDecodeErrc>(c)),
+        std::printf(" %s %llu", to_string(static_cast<ImuGloveDecodeErrc>(c)),
                     static_cast<unsigned long long>(s.decode_errors_by_code[c]));
       }
     }
@@ -131,8 +132,8 @@ void print_summary(const GloveStreamStats& s, double span_s, const std::array<La
   }
   std::printf("\n%-4s %9s %8s %7s %8s %8s %7s  %-26s %s\n", "IMU", "good", "rate Hz", "stale", "acc sat", "gyr sat",
               "errors", "last accel m/s^2", "last gyro rad/s");
-  for (std::size_t i = 0; i < kGloveMaxImus; ++i) {
-    const GloveImuStats& m = s.imus[i];
+  for (std::size_t i = 0; i < kImuGloveMaxImus; ++i) {
+    const ImuGloveImuStats& m = s.imus[i];
     if (m.good + m.rejected == 0) continue;
     char accel[64] = "-", gyro[64] = "-";
     if (last[i].seen) {
@@ -147,62 +148,24 @@ void print_summary(const GloveStreamStats& s, double span_s, const std::array<La
   }
 }
 
-// Whether a complete report with a matching CRC starts at `at`.
-bool valid_frame_at(std::span<const std::uint8_t> bytes, std::size_t at) {
-  const std::size_t size = report_size_for_id(bytes[at]);
-  if (size == 0 || bytes.size() - at < size) return false;
-  const auto frame = bytes.subspan(at, size);
-  return crc16_ccitt(frame.first(size - 2)) == static_cast<std::uint16_t>(frame[size - 2] | frame[size - 1] << 8);
-}
-
-// A capture file: report after report as hid_read returns them; each report's
-// ID gives its size. After a bad frame the reader goes on at the next offset
-// where a valid report starts: a corrupted payload costs that report, a
-// corrupted ID byte or a torn write costs no more than the bytes up to the
-// next good report.
+// A capture file: report after report as hid_read returns them, read by
+// hid::CaptureReader, which resynchronises after damage (capture_file.hpp).
 int monitor_file(const MonitorArgs& a) {
-  auto text = read_input_file(a.from_file, "capture file", kMaxCaptureBytes);
-  if (!text) {
-    return logger().error("{}; pass a file written by 'proprio glove emulate --out'", text.error().message), 1;
-  }
-  const std::vector<std::uint8_t> bytes(text->begin(), text->end());
-  GloveStreamOptions so;
+  ImuGloveStreamOptions so;
   so.nominal_rate_hz = a.rate_hz;
-  GloveStreamDecoder decoder(so);
-  std::array<GloveSample, kGloveImusPerReport> out;
-  std::array<LastValues, kGloveMaxImus> last{};
-  std::uint64_t skipped_bytes = 0;
-  std::size_t next_good = 0;  // the next offset where a valid report starts, once searched for
+  ImuGloveStreamDecoder decoder(so);
+  std::array<ImuGloveSample, kImuGloveImusPerReport> out;
+  std::array<LastValues, kImuGloveMaxImus> last{};
   // Device time covered, summed over epochs (a restart starts a new timeline).
   double span_s = 0.0;
   bool in_epoch = false;
   std::int64_t epoch_first_us = 0, epoch_last_us = 0;
   std::uint32_t epoch = 0;
-  for (std::size_t at = 0; at < bytes.size();) {
-    std::size_t size = report_size_for_id(bytes[at]);
-    if (size == 0) {
-      ++skipped_bytes;
-      ++at;
-      continue;
-    }
-    size = std::min(size, bytes.size() - at);
-    if (!valid_frame_at(bytes, at) && at + size < bytes.size() && !valid_frame_at(bytes, at + size)) {
-      // Neither this report nor the next is good: framing may be lost. Find
-      // where the next good report starts (once per damaged stretch).
-      if (next_good <= at) {
-        next_good = at + 1;
-        while (next_good < bytes.size() && !valid_frame_at(bytes, next_good)) ++next_good;
-      }
-      if ((next_good - at) % size != 0) {
-        skipped_bytes += next_good - at;  // torn or shifted: not whole reports
-        at = next_good;
-        continue;
-      }
-      // Whole reports, just damaged: decode them so they count as undecodable.
-    }
-    const auto r = decoder.push(std::span(bytes).subspan(at, size), out);
-    at += size;
-    if (r.verdict != GloveReportVerdict::accepted) continue;
+  hid::CaptureReaderOptions ro;
+  ro.max_bytes = kMaxCaptureBytes;
+  const auto read = hid::read_capture_file(a.from_file, {&report_size_for_id}, ro, [&](const hid::CaptureFrame& f) {
+    const auto r = decoder.push(f.bytes, out);
+    if (r.verdict != ImuGloveReportVerdict::accepted) return;
     if (!in_epoch || r.epoch != epoch) {
       if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
       in_epoch = true;
@@ -214,20 +177,26 @@ int monitor_file(const MonitorArgs& a) {
       auto& l = last[out[i].imu.sensor_id];
       l = {true, out[i].imu.accel_mps2, out[i].imu.gyro_radps};
     }
+  });
+  if (!read) {
+    return logger().error("{}; pass a file written by 'proprio glove emulate --out'", read.error().message), 1;
   }
   if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
-  const GloveStreamStats& s = decoder.stats();
+  const ImuGloveStreamStats& s = decoder.stats();
   // A tick's span is one period longer than first-to-last.
   if (s.accepted > 0) span_s += s.tick_period_us * 1e-6 * static_cast<double>(s.device_resets + 1);
-  std::printf("%s: %zu bytes, %.2f s of device time", a.from_file.c_str(), bytes.size(), span_s);
-  if (skipped_bytes) std::printf(", %llu bytes skipped to resynchronise", static_cast<unsigned long long>(skipped_bytes));
+  std::printf("%s: %zu bytes, %.2f s of device time", a.from_file.c_str(),
+              static_cast<std::size_t>(read->bytes_consumed), span_s);
+  if (read->skipped_bytes) {
+    std::printf(", %llu bytes skipped to resynchronise", static_cast<unsigned long long>(read->skipped_bytes));
+  }
   std::printf("\n");
   print_summary(s, span_s, last);
   return s.accepted > 0 ? 0 : 1;
 }
 
 int monitor_live(const MonitorArgs& a) {
-  HidDeviceSelector sel;
+  hid::HidDeviceSelector sel;
   sel.vendor_id = parse_hex_id(a.vid);
   sel.product_id = parse_hex_id(a.pid);
   sel.serial = a.serial;
@@ -235,12 +204,12 @@ int monitor_live(const MonitorArgs& a) {
   // A path that names no hidraw node will not become one: say so now rather
   // than retrying to open it until --seconds run out.
   if (!a.path.empty()) {
-    if (auto s = devices::check_hidraw_node(a.path); !s) return report_error(s.error());
+    if (auto s = hid::check_hidraw_node(a.path); !s) return report_error(s.error());
   }
-  GloveDeviceOptions o;
+  ImuGloveDeviceOptions o;
   o.stream.nominal_rate_hz = a.rate_hz;
-  GloveDevice device(std::make_unique<HidapiTransport>(sel), o);
-  device.set_state_callback([](GloveLinkState state, std::string_view detail) {
+  ImuGloveDevice device(std::make_unique<hid::HidapiTransport>(sel), o);
+  device.set_state_callback([](hid::LinkState state, std::string_view detail) {
     // On the reader thread; stdout is line-buffered per call.
     std::printf("[%s] %.*s\n", to_string(state), static_cast<int>(detail.size()), detail.data());
     std::fflush(stdout);
@@ -258,17 +227,17 @@ int monitor_live(const MonitorArgs& a) {
   }
   const auto start = std::chrono::steady_clock::now();
   auto next_print = start + std::chrono::duration<double>(a.interval_s);
-  std::array<LastValues, kGloveMaxImus> last{};
-  GloveDeviceStats prev = device.stats();
+  std::array<LastValues, kImuGloveMaxImus> last{};
+  ImuGloveDeviceStats prev = device.stats();
   auto prev_time = start;
-  GloveSample sample;
+  ImuGloveSample sample;
   while (!g_sigint_stop.load()) {
-    while (device.pop(sample)) last[sample.imu.sensor_id % kGloveMaxImus] = {true, sample.imu.accel_mps2, sample.imu.gyro_radps};
+    while (device.pop(sample)) last[sample.imu.sensor_id % kImuGloveMaxImus] = {true, sample.imu.accel_mps2, sample.imu.gyro_radps};
     const auto now = std::chrono::steady_clock::now();
     const double elapsed = std::chrono::duration<double>(now - start).count();
     if (a.seconds > 0 && elapsed >= a.seconds) break;
     if (now >= next_print) {
-      const GloveDeviceStats st = device.stats();
+      const ImuGloveDeviceStats st = device.stats();
       const double dt = std::chrono::duration<double>(now - prev_time).count();
       const auto d = [&](std::uint64_t cur, std::uint64_t old) { return static_cast<double>(cur - old); };
       const double lat_n = d(st.excess_latency_count, prev.excess_latency_count);
@@ -294,7 +263,7 @@ int monitor_live(const MonitorArgs& a) {
   }
   device.stop();
   std::signal(SIGINT, previous);
-  const GloveDeviceStats st = device.stats();
+  const ImuGloveDeviceStats st = device.stats();
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf("\n%.1f s: %llu connect(s), %llu disconnect(s), %llu failed open(s); %llu samples delivered, %llu "
               "rejected, %llu dropped at a full queue; clock %+.2f ppm, %llu re-lock(s), time clamps %llu, "
@@ -363,11 +332,11 @@ int run_emulate(const EmulateArgs& a) {
   sim::HandMotionGenerator motion(HandModel(*shape), mo);
   sim::ImuNoiseOptions no;
   no.sample_rate_hz = a.rate_hz;
-  auto imu = sim::ImuSimulator::create(motion, GloveDescription::vist_default().place_imus(*shape, mo.hand), no,
+  auto imu = sim::ImuSimulator::create(motion, ImuGloveDescription::vist_default().place_imus(*shape, mo.hand), no,
                                        mix_seed(a.seed, 2));
   if (!imu) return logger().error("{}", imu.error().message), 1;
 
-  GloveEmulatorOptions eo;
+  ImuGloveEmulatorOptions eo;
   eo.imu_count = static_cast<std::uint8_t>(imu->imu_count());
   eo.rate_hz = static_cast<std::uint16_t>(a.rate_hz);
   eo.clock_error_ppm = a.clock_ppm;
@@ -383,7 +352,7 @@ int run_emulate(const EmulateArgs& a) {
     eo.faults.unplugs.push_back({seconds_to_ns(std::strtod(u.substr(0, colon).c_str(), nullptr)),
                                  seconds_to_ns(std::strtod(u.substr(colon + 1).c_str(), nullptr))});
   }
-  auto emulator = GloveEmulator::create(eo);
+  auto emulator = ImuGloveEmulator::create(eo);
   if (!emulator) return logger().error("{}", emulator.error().message), 1;
 
   if (auto s = check_output_path(a.out, "capture file"); !s) return report_error(s.error());
@@ -393,12 +362,12 @@ int run_emulate(const EmulateArgs& a) {
   logger().info("IMUs: {}", imu->describe());
   const auto ticks = static_cast<std::int64_t>(a.seconds * a.rate_hz);
   ProgressBar progress("glove emulate", a.seconds, "s emulated");
-  std::vector<GloveEmulatedReport> reports;
+  std::vector<ImuGloveEmulatedReport> reports;
   std::vector<ImuSample> samples;
   std::uint64_t bytes = 0;
   auto write = [&] {
     for (const auto& r : reports) file.write(reinterpret_cast<const char*>(r.bytes.data()), r.bytes.size());
-    bytes += reports.size() * kGloveDataReportSize;
+    bytes += reports.size() * kImuGloveDataReportSize;
     reports.clear();
   };
   for (std::int64_t k = 0; k < ticks; ++k) {
@@ -414,7 +383,7 @@ int run_emulate(const EmulateArgs& a) {
   progress.finish();
   file.close();
   if (!file) return logger().error("writing {} failed", a.out), 1;
-  const GloveEmulatorStats& st = emulator->stats();
+  const ImuGloveEmulatorStats& st = emulator->stats();
   std::printf("wrote %s: %llu reports (%llu bytes), %lld ticks of %zu IMUs at %d Hz (%.1f s), seed %llu\n",
               a.out.c_str(), static_cast<unsigned long long>(st.reports_sent), static_cast<unsigned long long>(bytes),
               static_cast<long long>(ticks), imu->imu_count(), a.rate_hz, a.seconds,
@@ -431,10 +400,7 @@ int run_emulate(const EmulateArgs& a) {
 }  // namespace
 
 void add_glove_command(CLI::App& app, int& exit_code) {
-  CLI::App* glove = app.add_subcommand(
-      "glove",
-      "The USB HID IMU glove (7 IMUs at 100 Hz; protocol in docs/glove-hid-protocol.md): list devices, monitor a "
-      "glove or a capture file, or emulate one.");
+  CLI::App* glove = add_command(app, "glove");
   glove->require_subcommand(1);
   const auto hex = [](const std::string& s) { return check_hex_id(s); };
 
@@ -463,7 +429,7 @@ void add_glove_command(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   mon_cmd->add_option("--rate", mon->rate_hz, "Tick rate to assume until the glove's own is measured, Hz")
-      ->check(CLI::Range(1.0, static_cast<double>(kGloveMaxRateHz)))
+      ->check(CLI::Range(1.0, static_cast<double>(kImuGloveMaxRateHz)))
       ->capture_default_str();
   mon_cmd->add_option("--from-file", mon->from_file, "Decode this capture file instead of a live glove")
       ->check(CLI::ExistingFile);
@@ -489,7 +455,7 @@ void add_glove_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   emu_cmd->add_option("--hand", emu->hand, "Which hand")->check(CLI::IsMember({"left", "right"}))->capture_default_str();
   emu_cmd->add_option("--rate", emu->rate_hz, "IMU sample rate, Hz")
-      ->check(CLI::Range(1, static_cast<int>(kGloveMaxRateHz)))
+      ->check(CLI::Range(1, static_cast<int>(kImuGloveMaxRateHz)))
       ->capture_default_str();
   emu_cmd->add_option("--clock-ppm", emu->clock_ppm, "Device crystal error, ppm (a real one is within ±100)")
       ->check(CLI::Range(-1000.0, 1000.0))

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "proprio/core/data_dir.hpp"
 #include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/haptics/contact_sim.hpp"
@@ -24,10 +25,6 @@ namespace proprio::cli {
 namespace {
 
 using namespace proprio::haptics;
-
-#ifndef PROPRIO_SOURCE_DIR
-#define PROPRIO_SOURCE_DIR "."
-#endif
 
 struct SceneChoice {
   HapticScene scene;
@@ -78,7 +75,7 @@ HandModel cli_hand(double length_m, double width_m) {
 
 struct SimArgs {
   std::string scene = "half-cylinder";
-  std::string device = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml";
+  std::string device = data_path("haptics/band_2dof.toml");
   double seconds = 8.0;
   double press_depth_m = TouchScriptOptions{}.press_depth_m;
   double hand_length_m = 0.19, hand_width_m = 0.09;
@@ -277,7 +274,7 @@ Quantiles quantiles(std::vector<double> v) {
 int run_bench(const BenchArgs& a) {
   const HandModel hand = cli_hand(0.19, 0.09);
   auto scene = make_scene("peg-in-hole");
-  auto device = load_device_model(std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/platform_3dof.toml");
+  auto device = load_device_model(data_path("haptics/platform_3dof.toml"));
   if (!device) return report_error(device.error());
   std::shared_ptr<const FingertipDeviceModel> model(std::move(*device));
 
@@ -361,7 +358,7 @@ int run_bench(const BenchArgs& a) {
 }  // namespace
 
 void add_haptics_commands(CLI::App& app, int& exit_code) {
-  auto* h = subcommand_group(app, "haptics", "Contact simulation and fingertip haptic devices");
+  auto* h = add_command(app, "haptics");
 
   auto sim_args = std::make_shared<SimArgs>();
   auto* s = h->add_subcommand(
@@ -402,12 +399,8 @@ void add_haptics_commands(CLI::App& app, int& exit_code) {
 
   add_haptics_device_commands(*h, exit_code);
 
-  auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
   auto bench_args = std::make_shared<BenchArgs>();
-  auto* b = bench->add_subcommand(
-      "haptics",
-      "Time the MuJoCo step (hand + peg-in-hole, pressing) and the 1 kHz servo loop on its own thread:\n"
-      "tick duration, wake-up jitter and overruns. Timings depend on the machine and its load.");
+  auto* b = add_command(app, "bench haptics");
   b->add_option("--seconds", bench_args->seconds, "how long the servo loop runs")
       ->check(CLI::Range(0.5, 600.0))
       ->capture_default_str();

@@ -6,9 +6,10 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "proprio/core/data_dir.hpp"
 #include "proprio/core/log.hpp"
-#include "proprio/devices/fingertip_device.hpp"
-#include "proprio/devices/fingertip_emulator.hpp"
+#include "proprio/fingertip_device/fingertip_device.hpp"
+#include "proprio/fingertip_device/fingertip_emulator.hpp"
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
 #include "proprio/haptics/safety.hpp"
@@ -17,10 +18,6 @@ namespace proprio::cli {
 namespace {
 
 using namespace proprio::haptics;
-
-#ifndef PROPRIO_SOURCE_DIR
-#define PROPRIO_SOURCE_DIR "."
-#endif
 
 int run_devices() {
   auto list = devices::enumerate_fingertip_devices();
@@ -51,7 +48,7 @@ struct TestArgs {
 };
 
 std::string default_model_for(devices::FingertipDeviceKind kind) {
-  const std::string dir = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/";
+  const std::string dir = data_path("haptics") + "/";
   switch (kind) {
     case devices::FingertipDeviceKind::band_2dof: return dir + "band_2dof.toml";
     case devices::FingertipDeviceKind::platform_3dof: return dir + "platform_3dof.toml";
@@ -74,9 +71,9 @@ FingertipForce pattern(double t, double duration, double force, double shear) {
 }
 
 int run_test(const TestArgs& a) {
-  std::shared_ptr<devices::FakeHidLink> link;
+  std::shared_ptr<hid::FakeHidLink> link;
   std::unique_ptr<devices::FingertipEmulatorServer> server;
-  std::unique_ptr<devices::HidTransport> transport;
+  std::unique_ptr<hid::HidTransport> transport;
   std::shared_ptr<const FingertipDeviceModel> model;
   if (a.device == "emulated") {
     auto loaded = load_device_model(a.model.empty() ? default_model_for(devices::FingertipDeviceKind::platform_3dof) : a.model);
@@ -85,16 +82,16 @@ int run_test(const TestArgs& a) {
     // The emulated device speaks the same bytes over an in-memory link.
     auto emulator = make_device_emulator(model, emulator_options_for(*model));
     if (!emulator) return report_error(emulator.error());
-    link = std::make_shared<devices::FakeHidLink>();
+    link = std::make_shared<hid::FakeHidLink>();
     server = std::make_unique<devices::FingertipEmulatorServer>(std::move(*emulator), link);
     server->start();
-    transport = std::make_unique<devices::FakeHidTransport>(link);
+    transport = std::make_unique<hid::FakeHidTransport>(link);
   } else {
     const bool is_path = a.device.rfind("/dev/", 0) == 0;
     if (is_path) {
-      if (auto s = devices::check_hidraw_node(a.device); !s) return report_error(s.error());
+      if (auto s = hid::check_hidraw_node(a.device); !s) return report_error(s.error());
     }
-    transport = std::make_unique<devices::HidapiTransport>(
+    transport = std::make_unique<hid::HidapiTransport>(
         devices::fingertip_device_selector(is_path ? std::string() : a.device, is_path ? a.device : std::string()));
   }
   auto device = std::make_shared<devices::FingertipDevice>(std::move(transport));

@@ -321,11 +321,7 @@ int run_replay(const ReplayArgs& a) {
 
 void add_replay_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ReplayArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "replay",
-      "Read a recording: list its streams, check its integrity, summarise the hand motion and play the hand poses "
-      "through the replay HandSource.\nA file cut short by a crash is read up to its last complete record. "
-      "Exit status: 0 readable, 1 cannot open, 3 corrupt data found.");
+  CLI::App* cmd = add_command(app, "replay");
   cmd->add_option("file", args->file, "Recording (.prec)")->required()->check(CLI::ExistingFile);
   cmd->add_flag("--summary", args->summary, "Print the summary (the default output)");
   cmd->add_option("--records", args->print_records, "Also print the first N records, one per line");

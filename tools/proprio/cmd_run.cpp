@@ -9,6 +9,7 @@
 
 #include "commands.hpp"
 #include "run_args.hpp"
+#include "proprio/core/data_dir.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/core/replay_source.hpp"
 #include "proprio/engine/app.hpp"
@@ -16,7 +17,7 @@
 #include "proprio/haptics/device_model.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
 #include "proprio/haptics/hid_channels.hpp"
-#include "proprio/openxr_layer/hand_sources.hpp"
+#include "proprio/hand_sources/hand_sources.hpp"
 #include "proprio/sim/sim_hand_source.hpp"
 
 namespace proprio::cli {
@@ -163,7 +164,7 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
       sc.subject = a.sim_subject;
       sc.seed = a.seed;
     }
-    auto src = openxr_layer::start_hand_source(sc, 50 * kNsPerMillisecond);
+    auto src = hand_sources::start_hand_source(sc, 50 * kNsPerMillisecond);
     if (!src) return src.error();
     std::shared_ptr<HandSource> source = std::move(*src);
     in.hands = a.no_recentre ? source
@@ -213,7 +214,7 @@ Result<std::vector<haptics::ServoChannel>> open_hid_haptics(const RunArgs& a) {
   }
   ho.hand = *parse_handedness(a.hand);
   if (a.device_given) ho.model_file = a.device;
-  ho.model_dir = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics";
+  ho.model_dir = data_path("haptics");
   auto listed = devices::enumerate_fingertip_devices();
   if (!listed) return listed.error();
   auto channels = haptics::open_hid_channels(ho, *listed);
@@ -241,12 +242,7 @@ Result<engine::AppReport> run_app_until_done(engine::App& app) {
 
 void add_run_command(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<RunArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "run",
-      "Run a scene with the engine: tracked hands, the haptics servo loop and the renderer. Output goes to an HMD "
-      "through OpenXR when a runtime with XR_KHR_vulkan_enable2 is present, else to a window, else headless to PNG "
-      "frames (force one with --xr, --window or --headless). Headless runs step simulated time, so they are "
-      "reproducible.");
+  CLI::App* cmd = add_command(app, "run");
   cmd->add_option("scene", a->scene, "built-in scene (half-cylinder, peg-in-hole, table, empty) or a scene .toml "
                                      "(docs/engine.md)")
       ->capture_default_str();

@@ -84,8 +84,8 @@ int run_peg_in_hole_impl(const RunArgs& a) {
   // devices, unless --fingers/--device say otherwise).
   RunArgs live = a;
   if (live.fingers == std::vector<std::string>{"index"}) live.fingers = {"thumb", "index", "middle"};
-  if (live.device == std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml") {
-    live.device = config.devices.model.empty() ? std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/platform_3dof.toml"
+  if (live.device == data_path("haptics/band_2dof.toml")) {
+    live.device = config.devices.model.empty() ? data_path("haptics/platform_3dof.toml")
                                                : config.devices.model.string();
   }
   LiveRunner runner = [&live](engine::Scene scene, engine::AppInputs extra) -> Result<engine::AppReport> {

@@ -237,7 +237,7 @@ int run_hmd_calibration_impl(const RunArgs& a) {
 }
 
 int run_perception_threshold_impl(const RunArgs& a) {
-  auto protocol = a.design.empty() ? Result<PerceptionProtocol>(PerceptionProtocol::defaults(PROPRIO_SOURCE_DIR))
+  auto protocol = a.design.empty() ? Result<PerceptionProtocol>(PerceptionProtocol::defaults())
                                    : PerceptionProtocol::load_file(a.design);
   if (!protocol) return report_error(protocol.error());
   auto design = study::StudyDesign::load_file(protocol->design_file);

@@ -100,11 +100,7 @@ int run_sim_hand(const SimHandArgs& a) {
 
 void add_sim_hand_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<SimHandArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "sim-hand",
-      "Simulate a hand performing a motion protocol and record its ground truth.\n"
-      "Writes streams hand/<hand>/ground_truth (26 joint poses with velocities), "
-      "hand/<hand>/joint_angles_ground_truth, head/ground_truth and events.");
+  CLI::App* cmd = add_command(app, "sim-hand");
   cmd->add_option("--subject", args->subject, "Simulated subject 0-14 (hand sizes span 17-20.5 cm x 9-11 cm)")
       ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
       ->capture_default_str();

@@ -29,11 +29,12 @@
 #include "commands.hpp"
 #include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
-#include "proprio/devices/hid_transport.hpp"
-#include "proprio/devices/stretch_device.hpp"
-#include "proprio/devices/stretch_emulator.hpp"
-#include "proprio/devices/stretch_protocol.hpp"
-#include "proprio/devices/stretch_stream.hpp"
+#include "proprio/hid/capture_file.hpp"
+#include "proprio/hid/hid_transport.hpp"
+#include "proprio/stretch_board/stretch_device.hpp"
+#include "proprio/stretch_board/stretch_emulator.hpp"
+#include "proprio/stretch_board/stretch_protocol.hpp"
+#include "proprio/stretch_board/stretch_stream.hpp"
 
 namespace proprio::cli {
 
@@ -58,11 +59,11 @@ struct ListArgs {
 int run_list(const ListArgs& a) {
   const std::uint16_t vid = a.all ? 0 : parse_hex_id(a.vid);
   const std::uint16_t pid = a.all ? 0 : parse_hex_id(a.pid);
-  auto devices = enumerate_hid_devices(vid, pid);
+  auto devices = hid::enumerate_hid_devices(vid, pid);
   if (!devices) return logger().error("{}", devices.error().message), 1;
   if (devices->empty()) {
     if (a.all) {
-      std::printf("no HID devices found (hidapi %s)\n", hidapi_version().c_str());
+      std::printf("no HID devices found (hidapi %s)\n", hid::hidapi_version().c_str());
     } else {
       std::printf("no stretch board found with VID:PID %s:%s; 'proprio stretch-board list --all' lists every HID "
                   "device\n",
@@ -71,7 +72,7 @@ int run_list(const ListArgs& a) {
     return 0;
   }
   std::printf("%-20s %-9s %-8s %-4s %-16s %s\n", "path", "vid:pid", "usage", "intf", "serial", "manufacturer / product");
-  for (const HidDeviceInfo& d : *devices) {
+  for (const hid::HidDeviceInfo& d : *devices) {
     const bool board = d.vendor_id == kStretchUsbVendorId && d.product_id == kStretchUsbProductId &&
                        (d.usage_page == 0 || d.usage_page == kStretchHidUsagePage);
     std::printf("%-20s %s:%s %04x:%02x %-4d %-16s %s / %s%s\n", d.path.c_str(), hex4(d.vendor_id).c_str(),
@@ -191,14 +192,6 @@ struct MonitorArgs {
   std::string from_file;
 };
 
-// Whether a complete report with a matching CRC starts at `at`.
-bool valid_frame_at(std::span<const std::uint8_t> bytes, std::size_t at) {
-  const std::size_t size = stretch_report_size_for_id(bytes[at]);
-  if (size == 0 || bytes.size() - at < size) return false;
-  const auto frame = bytes.subspan(at, size);
-  return crc16_ccitt(frame.first(size - 2)) == static_cast<std::uint16_t>(frame[size - 2] | frame[size - 1] << 8);
-}
-
 StretchStreamOptions stream_options(const MonitorArgs& a) {
   StretchStreamOptions so;
   so.nominal_rate_hz = a.rate_hz;
@@ -207,71 +200,46 @@ StretchStreamOptions stream_options(const MonitorArgs& a) {
   return so;
 }
 
-// A capture file: report after report as hid_read returns them; each
-// report's ID gives its size. After a bad frame the reader goes on at the
-// next offset where a valid report starts: a corrupted payload costs that
-// report, a corrupted ID byte or a torn write no more than the bytes up to
-// the next good report.
+// A capture file: report after report as hid_read returns them, read by
+// hid::CaptureReader, which resynchronises after damage (capture_file.hpp).
 int monitor_file(const MonitorArgs& a) {
-  auto text = read_input_file(a.from_file, "capture file", kMaxCaptureBytes);
-  if (!text) {
-    return logger().error("{}; pass a file written by 'proprio stretch-board emulate --out' or captured with "
-                          "'cat /dev/hidrawN'",
-                          text.error().message),
-           1;
-  }
-  const std::vector<std::uint8_t> bytes(text->begin(), text->end());
   StretchStreamDecoder decoder(stream_options(a));
   std::array<StretchSample, kStretchMeasurementsPerReport> out;
   LatestValues latest;
-  std::uint64_t skipped_bytes = 0;
-  std::size_t next_good = 0;  // the next offset where a valid report starts, once searched for
   // Device time covered, summed over epochs (a restart starts a new timeline).
   double span_s = 0.0;
   bool in_epoch = false;
   std::int64_t epoch_first_us = 0, epoch_last_us = 0;
   std::uint32_t epoch = 0;
-  for (std::size_t at = 0; at < bytes.size();) {
-    std::size_t size = stretch_report_size_for_id(bytes[at]);
-    if (size == 0) {
-      ++skipped_bytes;
-      ++at;
-      continue;
-    }
-    size = std::min(size, bytes.size() - at);
-    if (!valid_frame_at(bytes, at) && at + size < bytes.size() && !valid_frame_at(bytes, at + size)) {
-      // Neither this report nor the next is good: framing may be lost. Find
-      // where the next good report starts (once per damaged stretch).
-      if (next_good <= at) {
-        next_good = at + 1;
-        while (next_good < bytes.size() && !valid_frame_at(bytes, next_good)) ++next_good;
-      }
-      if ((next_good - at) % size != 0) {
-        skipped_bytes += next_good - at;  // torn or shifted: not whole reports
-        at = next_good;
-        continue;
-      }
-      // Whole reports, just damaged: decode them so they count as undecodable.
-    }
-    const auto r = decoder.push(std::span(bytes).subspan(at, size), out);
-    at += size;
-    if (r.verdict != StretchReportVerdict::accepted) continue;
-    if (!in_epoch || r.epoch != epoch) {
-      if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
-      in_epoch = true;
-      epoch = r.epoch;
-      epoch_first_us = r.device_time_us;
-      epoch_last_us = r.last_device_time_us;
-    }
-    epoch_last_us = std::max(epoch_last_us, r.last_device_time_us);
-    for (std::size_t i = 0; i < r.sample_count; ++i) latest.add(out[i]);
+  hid::CaptureReaderOptions ro;
+  ro.max_bytes = kMaxCaptureBytes;
+  const auto read =
+      hid::read_capture_file(a.from_file, {&stretch_report_size_for_id}, ro, [&](const hid::CaptureFrame& f) {
+        const auto r = decoder.push(f.bytes, out);
+        if (r.verdict != StretchReportVerdict::accepted) return;
+        if (!in_epoch || r.epoch != epoch) {
+          if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
+          in_epoch = true;
+          epoch = r.epoch;
+          epoch_first_us = r.device_time_us;
+          epoch_last_us = r.last_device_time_us;
+        }
+        epoch_last_us = std::max(epoch_last_us, r.last_device_time_us);
+        for (std::size_t i = 0; i < r.sample_count; ++i) latest.add(out[i]);
+      });
+  if (!read) {
+    return logger().error("{}; pass a file written by 'proprio stretch-board emulate --out' or captured with "
+                          "'cat /dev/hidrawN'",
+                          read.error().message),
+           1;
   }
   if (in_epoch) span_s += static_cast<double>(epoch_last_us - epoch_first_us) * 1e-6;
   const StretchStreamStats& s = decoder.stats();
   // A measurement's span is one period longer than first-to-last.
   if (s.accepted > 0) span_s += s.measurement_period_us * 1e-6 * static_cast<double>(s.device_resets + 1);
-  std::printf("%s: %zu bytes, %.2f s of device time", a.from_file.c_str(), bytes.size(), span_s);
-  if (skipped_bytes) std::printf(", %llu bytes skipped to resynchronise", ull(skipped_bytes));
+  std::printf("%s: %zu bytes, %.2f s of device time", a.from_file.c_str(),
+              static_cast<std::size_t>(read->bytes_consumed), span_s);
+  if (read->skipped_bytes) std::printf(", %llu bytes skipped to resynchronise", ull(read->skipped_bytes));
   std::printf("\n");
   print_summary(s, span_s);
   print_grid(latest, s.top_strips, s.bottom_strips);
@@ -368,7 +336,7 @@ void print_state(StretchLinkState state, std::string_view detail) {
 }
 
 int monitor_live(const MonitorArgs& a) {
-  HidDeviceSelector sel = stretch_board_selector();
+  hid::HidDeviceSelector sel = stretch_board_selector();
   sel.vendor_id = parse_hex_id(a.vid);
   sel.product_id = parse_hex_id(a.pid);
   sel.serial = a.serial;
@@ -376,11 +344,11 @@ int monitor_live(const MonitorArgs& a) {
   // A path that names no hidraw node will not become one: say so now rather
   // than retrying to open it until --seconds run out.
   if (!a.path.empty()) {
-    if (auto s = devices::check_hidraw_node(a.path); !s) return report_error(s.error());
+    if (auto s = hid::check_hidraw_node(a.path); !s) return report_error(s.error());
   }
   StretchDeviceOptions o;
   o.stream = stream_options(a);
-  StretchDevice device(std::make_unique<HidapiTransport>(sel), o);
+  StretchDevice device(std::make_unique<hid::HidapiTransport>(sel), o);
   device.set_state_callback(print_state);
   if (a.seconds > 0) {
     std::printf("monitoring %s for %g s (Ctrl-C stops early)\n", sel.describe().c_str(), a.seconds);
@@ -508,7 +476,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   const SyntheticProvider provider{static_cast<std::size_t>(a.bottom_strips)};
   auto emulator = StretchEmulator::create(eo, provider);
   if (!emulator) return logger().error("{}", emulator.error().message), 1;
-  auto link = std::make_shared<FakeHidLink>();
+  auto link = std::make_shared<hid::FakeHidLink>();
   StretchEmulatorServer server(std::move(*emulator), link);
   StretchDeviceOptions o;
   o.stream.nominal_rate_hz = a.rate_hz;
@@ -516,7 +484,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   o.stream.expected_bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
   o.reconnect_backoff_max_ns = 200 * kNsPerMillisecond;
   o.deliver_flagged = true;  // the self-test checks that flagged readings are the injected ones
-  StretchDevice device(std::make_unique<FakeHidTransport>(link), o);
+  StretchDevice device(std::make_unique<hid::FakeHidTransport>(link), o);
   device.set_state_callback(print_state);
   std::printf("emulating a %d x %d strip board (%d combinations) at %d measurements/s for %g s over the in-memory HID "
               "link, seed %llu\n",
@@ -549,7 +517,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   server.stop();
   const StretchDeviceStats st = device.stats();
   const StretchEmulatorStats board = server.emulator_stats();
-  const FakeHidLinkStats cable = link->stats();
+  const hid::FakeHidLinkStats cable = link->stats();
   print_device_totals(st, elapsed);
   print_summary(st.stream, elapsed);
   print_grid(latest, a.top_strips, a.bottom_strips);
@@ -603,11 +571,7 @@ int run_emulate(const EmulateArgs& a) {
 }  // namespace
 
 void add_stretch_board_command(CLI::App& app, int& exit_code) {
-  CLI::App* board = app.add_subcommand(
-      "stretch-board",
-      "The stretch glove's USB HID read-out board (13 x 14 strips, 960 measurements/s; protocol in "
-      "docs/stretch-glove-hid-protocol.md): list devices, monitor a board or a capture file, or run an emulated board "
-      "as a self-test.");
+  CLI::App* board = add_command(app, "stretch-board");
   board->require_subcommand(1);
   const auto hex = [](const std::string& s) { return check_hex_id(s); };
 

@@ -15,13 +15,14 @@
 #include <csignal>
 #include <filesystem>
 
+#include "proprio/core/data_dir.hpp"
 #include "proprio/core/replay_source.hpp"
-#include "proprio/core/stretch_glove_layout.hpp"
-#include "proprio/glove/dataset_recorder.hpp"
-#include "proprio/glove/calibration.hpp"
-#include "proprio/devices/stretch_device.hpp"
-#include "proprio/glove/readout.hpp"
-#include "proprio/glove_eval/glove_evaluation.hpp"
+#include "proprio/glove_descriptions/stretch_glove_layout.hpp"
+#include "proprio/stretch_glove/dataset_recorder.hpp"
+#include "proprio/stretch_glove/calibration.hpp"
+#include "proprio/stretch_board/stretch_device.hpp"
+#include "proprio/stretch_glove/readout.hpp"
+#include "proprio/stretch_glove_eval/glove_evaluation.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 
@@ -34,7 +35,7 @@ Result<StretchGloveLayout> load_layout(const std::string& path) {
 }
 
 struct BenchGloveArgs {
-  std::string model = PROPRIO_DEFAULT_GLOVE_MODEL;
+  std::string model = data_path("models/stretch_glove_generic.onnx");
   std::string global_model;  // trained with --calibration global (the thesis's scenario 3)
   std::string layout;
   int subjects = 5;  // held-out subjects 10..14
@@ -52,15 +53,15 @@ int run_bench_glove(const BenchGloveArgs& a) {
     return 1;
   }
   struct Job {
-    glove_eval::GloveSessionSpec spec;
+    stretch_glove_eval::GloveSessionSpec spec;
   };
   std::vector<Job> jobs;
-  std::vector<glove_eval::CalibrationMode> modes = {glove_eval::CalibrationMode::session};
-  if (!a.global_model.empty()) modes.push_back(glove_eval::CalibrationMode::global);
+  std::vector<stretch_glove_eval::CalibrationMode> modes = {stretch_glove_eval::CalibrationMode::session};
+  if (!a.global_model.empty()) modes.push_back(stretch_glove_eval::CalibrationMode::global);
   for (auto mode : modes) {
     for (int i = 0; i < a.subjects; ++i) {
-      glove_eval::GloveSessionSpec s;
-      s.subject = glove_eval::kFirstHeldOutSubject + i;
+      stretch_glove_eval::GloveSessionSpec s;
+      s.subject = stretch_glove_eval::kFirstHeldOutSubject + i;
       s.task_s = a.minutes * 60.0;
       s.exploration_s = a.exploration_s;
       s.seed = a.seed;
@@ -72,7 +73,7 @@ int run_bench_glove(const BenchGloveArgs& a) {
                                          : std::max(1u, std::thread::hardware_concurrency());
   ProgressBar progress("bench glove", static_cast<double>(jobs.size()), "sessions");
   std::size_t done = 0;
-  std::vector<Result<glove_eval::GloveSessionResult>> results(jobs.size(),
+  std::vector<Result<stretch_glove_eval::GloveSessionResult>> results(jobs.size(),
                                                               make_error(Errc::unavailable, "not run"));
   std::vector<std::future<void>> running;
   std::size_t next = 0;
@@ -80,8 +81,8 @@ int run_bench_glove(const BenchGloveArgs& a) {
     while (next < jobs.size() && running.size() < threads) {
       const std::size_t j = next++;
       running.push_back(std::async(std::launch::async, [&, j] {
-        const bool global = jobs[j].spec.calibration == glove_eval::CalibrationMode::global;
-        results[j] = glove_eval::run_glove_session(*layout, global ? a.global_model : a.model, jobs[j].spec);
+        const bool global = jobs[j].spec.calibration == stretch_glove_eval::CalibrationMode::global;
+        results[j] = stretch_glove_eval::run_glove_session(*layout, global ? a.global_model : a.model, jobs[j].spec);
       }));
     }
     running.front().get();
@@ -100,11 +101,11 @@ int run_bench_glove(const BenchGloveArgs& a) {
                         {"note", "simulated subjects; simulated accuracy is not real-world accuracy"}};
   if (!a.json) {
     std::printf("\nStretch glove on held-out simulated subjects (%d..%d), %.1f min of free motion each\n",
-                glove_eval::kFirstHeldOutSubject, glove_eval::kFirstHeldOutSubject + a.subjects - 1, a.minutes);
+                stretch_glove_eval::kFirstHeldOutSubject, stretch_glove_eval::kFirstHeldOutSubject + a.subjects - 1, a.minutes);
     std::printf("%-28s %8s %10s %10s %12s\n", "calibration", "mean deg", "p95 deg", "1€ mean", "us/frame");
   }
   for (auto mode : modes) {
-    std::vector<glove_eval::GloveSessionResult> ok;
+    std::vector<stretch_glove_eval::GloveSessionResult> ok;
     nlohmann::json per_subject = nlohmann::json::array();
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       if (jobs[j].spec.calibration != mode) continue;
@@ -121,7 +122,7 @@ int run_bench_glove(const BenchGloveArgs& a) {
                              {"calibration_coverage", results[j]->calibration_coverage}});
     }
     if (ok.empty()) continue;
-    const auto agg = glove_eval::aggregate(ok);
+    const auto agg = stretch_glove_eval::aggregate(ok);
     nlohmann::json dofs;
     for (std::size_t d = 0; d < kHandDofCount; ++d) {
       dofs[std::string(to_string(static_cast<HandDof>(d)))] = agg.dof_mean_deg[d];
@@ -155,18 +156,18 @@ struct CalibrateGloveArgs {
 
 // The exploration phase on a live read-out board: measurements through the
 // same read-out and calibrator as the run-time pipeline, with advice every 5 s.
-Result<glove::MinMaxCalibration> calibrate_from_board(const StretchGloveLayout& layout, double seconds,
-                                                      glove::CalibrationProgress& progress) {
+Result<stretch_glove::MinMaxCalibration> calibrate_from_board(const StretchGloveLayout& layout, double seconds,
+                                                      stretch_glove::CalibrationProgress& progress) {
   devices::StretchDeviceOptions o;
   o.stream.expected_top_strips = static_cast<std::uint8_t>(layout.top_strips);
   o.stream.expected_bottom_strips = static_cast<std::uint8_t>(layout.bottom_strips);
-  devices::StretchDevice device(std::make_unique<devices::HidapiTransport>(devices::stretch_board_selector()), o);
+  devices::StretchDevice device(std::make_unique<hid::HidapiTransport>(devices::stretch_board_selector()), o);
   if (auto st = device.start(); !st) return st.error();
-  auto readout = glove::MatrixReadout::create(layout);
+  auto readout = stretch_glove::MatrixReadout::create(layout);
   if (!readout) return readout.error();
-  auto calibrator = glove::MinMaxCalibrator::create(layout);
+  auto calibrator = stretch_glove::MinMaxCalibrator::create(layout);
   if (!calibrator) return calibrator.error();
-  glove::CellFrame frame = readout->make_frame();
+  stretch_glove::CellFrame frame = readout->make_frame();
   const TimeNs start = MonotonicClock::instance().now_ns();
   TimeNs next_report = start + 5 * kNsPerSecond;
   devices::StretchSample m;
@@ -181,7 +182,7 @@ Result<glove::MinMaxCalibration> calibrate_from_board(const StretchGloveLayout& 
       const auto st = device.stats();
       std::printf("  %3.0f s: %s (board: %s, %llu measurements)\n",
                   1e-9 * static_cast<double>(MonotonicClock::instance().now_ns() - start),
-                  calibrator->progress().advice().c_str(), devices::to_string(st.state),
+                  calibrator->progress().advice().c_str(), hid::to_string(st.state),
                   static_cast<unsigned long long>(st.samples_delivered));
     }
   }
@@ -206,10 +207,10 @@ int run_calibrate_glove(const CalibrateGloveArgs& a) {
   std::printf("Explore for %.0f s: make a fist, spread and close the fingers, bend each finger on its own, move the "
               "thumb across the palm and out\n",
               a.seconds);
-  Result<glove::MinMaxCalibration> cal = make_error(Errc::unavailable, "not run");
-  glove::CalibrationProgress progress;
+  Result<stretch_glove::MinMaxCalibration> cal = make_error(Errc::unavailable, "not run");
+  stretch_glove::CalibrationProgress progress;
   if (a.sim_subject >= 0) {
-    auto r = glove_eval::calibrate_simulated(*layout, a.sim_subject, a.seed, a.seconds,
+    auto r = stretch_glove_eval::calibrate_simulated(*layout, a.sim_subject, a.seed, a.seconds,
                                              "proprio calibrate glove --sim-subject " + std::to_string(a.sim_subject));
     if (r) {
       progress = r->progress;
@@ -254,12 +255,12 @@ int run_record_glove(const RecordGloveArgs& a) {
   if (!a.force && std::filesystem::exists(a.out)) {
     return report_error(Error{Errc::invalid_argument, a.out + " exists; pass --force to replace it"});
   }
-  auto recorder = glove::DatasetRecorder::create(*layout);
+  auto recorder = stretch_glove::DatasetRecorder::create(*layout);
   if (!recorder) return report_error(recorder.error());
   devices::StretchDeviceOptions o;
   o.stream.expected_top_strips = static_cast<std::uint8_t>(layout->top_strips);
   o.stream.expected_bottom_strips = static_cast<std::uint8_t>(layout->bottom_strips);
-  devices::StretchDevice device(std::make_unique<devices::HidapiTransport>(devices::stretch_board_selector()), o);
+  devices::StretchDevice device(std::make_unique<hid::HidapiTransport>(devices::stretch_board_selector()), o);
   if (auto st = device.start(); !st) return report_error(st.error());
 
   std::printf("Recording %.0f s: first %.0f s of exploration (make a fist, spread and close the fingers, bend each "
@@ -282,7 +283,7 @@ int run_record_glove(const RecordGloveArgs& a) {
       next_report += 5 * kNsPerSecond;
       const auto st = device.stats();
       std::printf("  %4.0f s %-11s board %s, %zu frames (%zu incomplete)\n", 1e-9 * static_cast<double>(now - start),
-                  now < exploration_end ? "exploring" : "task", devices::to_string(st.state), recorder->frames(),
+                  now < exploration_end ? "exploring" : "task", hid::to_string(st.state), recorder->frames(),
                   recorder->stats().frames_invalid);
       std::fflush(stdout);
     }
@@ -298,7 +299,7 @@ int run_record_glove(const RecordGloveArgs& a) {
   ro.stream_name_filter = a.truth_stream;
   auto truth = ReplayHandSource::open(a.truth, ro);
   if (!truth) return report_error(truth.error());
-  glove::DatasetSessionInfo info;
+  stretch_glove::DatasetSessionInfo info;
   info.subject = a.subject;
   info.session = a.session;
   info.donning = a.donning >= 0 ? a.donning : a.session;
@@ -308,7 +309,7 @@ int run_record_glove(const RecordGloveArgs& a) {
   info.exploration_end_ns = exploration_end;
   auto session = recorder->finish(*truth, info);
   if (!session) return report_error(session.error());
-  auto writer = glove::DatasetWriter::create(a.out, *layout, 60.0, a.force);
+  auto writer = stretch_glove::DatasetWriter::create(a.out, *layout, 60.0, a.force);
   if (!writer) return report_error(writer.error());
   if (auto st = writer->add_session(*session); !st) return report_error(st.error());
   nlohmann::json generator = {{"tool", "proprio record glove"}, {"truth", a.truth}, {"truth_stream", a.truth_stream}};
@@ -324,7 +325,7 @@ int run_record_glove(const RecordGloveArgs& a) {
 }  // namespace
 
 void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
-  auto* rec = subcommand_group(app, "record", "Record training data");
+  auto* rec = add_command(app, "record");
   auto rargs = std::make_shared<RecordGloveArgs>();
   auto* r = rec->add_subcommand(
       "glove",
@@ -357,20 +358,14 @@ void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
   r->add_flag("--force", rargs->force, "replace --out");
   r->callback([rargs, &exit_code] { exit_code = run_record_glove(*rargs); });
 
-  auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
   auto args = std::make_shared<BenchGloveArgs>();
-  auto* g = bench->add_subcommand(
-      "glove",
-      "Run the stretch glove's pipeline (read-out, min-max calibration, ONNX pose model, hand) on held-out\n"
-      "simulated subjects and print the joint-angle error with each session's own min-max calibration (the thesis's\n"
-      "scenario 4) and, with --global-model, with the training data's min-max (scenario 3).\n"
-      "Simulated accuracy is not real-world accuracy.");
+  auto* g = add_command(app, "bench glove");
   g->add_option("--model", args->model, "pose model (.onnx with its .json sidecar)")->capture_default_str();
   g->add_option("--global-model", args->global_model,
                 "also score a model trained with the training data's min-max (train.py --calibration global)");
   g->add_option("--layout", args->layout, "glove layout TOML (default: the thesis-like glove)");
   g->add_option("--subjects", args->subjects, "held-out simulated subjects (10, 11, ...)")
-      ->check(CLI::Range(1, sim::kSimSubjectCount - glove_eval::kFirstHeldOutSubject))
+      ->check(CLI::Range(1, sim::kSimSubjectCount - stretch_glove_eval::kFirstHeldOutSubject))
       ->capture_default_str();
   g->add_option("--minutes", args->minutes, "minutes of free motion per subject")
       ->check(CLI::Range(0.1, 60.0))
@@ -383,7 +378,7 @@ void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
   g->add_flag("--json", args->json, "print the metrics as JSON");
   g->callback([args, &exit_code] { exit_code = run_bench_glove(*args); });
 
-  auto* cal = subcommand_group(app, "calibrate", "Calibrate sensors");
+  auto* cal = add_command(app, "calibrate");
   auto cargs = std::make_shared<CalibrateGloveArgs>();
   auto* c = cal->add_subcommand(
       "glove",

@@ -676,7 +676,7 @@ constexpr const char* kSubjectColumnHelp =
 
 void add_study_commands(CLI::App& app, int& exit_code) {
   // psychometric fit
-  auto* psy = subcommand_group(app, "psychometric", "Psychometric functions (docs/study.md)");
+  auto* psy = add_command(app, "psychometric");
   auto fit_args = std::make_shared<FitArgs>();
   auto* fit = psy->add_subcommand("fit", "Maximum-likelihood fit of a psychometric function to level,correct,trials data");
   fit->add_option("--data", fit_args->data, "CSV with columns level, correct, trials")->required();
@@ -702,7 +702,7 @@ void add_study_commands(CLI::App& app, int& exit_code) {
   fit->callback([fit_args, &exit_code] { exit_code = run_fit(*fit_args); });
 
   // stats
-  auto* stats = subcommand_group(app, "stats", "Statistics on wide CSVs (one row per subject, one column per condition)");
+  auto* stats = add_command(app, "stats");
   auto stats_args = std::make_shared<StatsArgs>();
   auto* rm = stats->add_subcommand("rm-anova", "Repeated-measures ANOVA with the Greenhouse-Geisser correction");
   rm->add_option("--data", stats_args->data, "CSV: one row per subject, one column per condition")->required();
@@ -722,7 +722,7 @@ void add_study_commands(CLI::App& app, int& exit_code) {
   pt->callback([stats_args, &exit_code] { exit_code = run_paired_t(*stats_args); });
 
   // study
-  auto* study = subcommand_group(app, "study", "Study designs and whole-study analysis (docs/study.md)");
+  auto* study = add_command(app, "study");
   auto an = std::make_shared<AnalyzeArgs>();
   auto* analyze = study->add_subcommand("analyze", "Fits, thresholds with CIs, statistics and plots for a folder of "
                                                    "session CSVs");

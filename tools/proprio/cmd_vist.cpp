@@ -16,9 +16,9 @@
 #include "proprio/core/file_io.hpp"
 #include "progress.hpp"
 #include "proprio/core/log.hpp"
-#include "proprio/devices/glove_device.hpp"
-#include "proprio/devices/glove_protocol.hpp"
-#include "proprio/devices/hid_transport.hpp"
+#include "proprio/imu_glove_board/imu_glove_device.hpp"
+#include "proprio/imu_glove_board/imu_glove_protocol.hpp"
+#include "proprio/hid/hid_transport.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "proprio/vist/vist_live.hpp"
 #include "proprio/vist_eval/evaluation.hpp"
@@ -83,9 +83,9 @@ struct Case {
 
 int run_bench_vist(const BenchVistArgs& a) {
   auto mode = vist_eval::parse_frame_mode(a.mode);
-  GloveDescription glove = GloveDescription::vist_default();
+  ImuGloveDescription glove = ImuGloveDescription::vist_default();
   if (!a.glove.empty()) {
-    auto g = GloveDescription::load(a.glove);
+    auto g = ImuGloveDescription::load(a.glove);
     if (!g) return logger().error("{}", g.error().message), 1;
     glove = std::move(*g);
   }
@@ -204,9 +204,9 @@ struct SimVistArgs {
   bool force = false;
 };
 
-Result<GloveDescription> load_glove(const std::string& path) {
-  if (path.empty()) return GloveDescription::vist_default();
-  return GloveDescription::load(path);
+Result<ImuGloveDescription> load_glove(const std::string& path) {
+  if (path.empty()) return ImuGloveDescription::vist_default();
+  return ImuGloveDescription::load(path);
 }
 
 int run_sim_vist(const SimVistArgs& a) {
@@ -247,8 +247,8 @@ struct TrackVistArgs {
   bool live = false;
   std::string glove;
   std::string hand = "right";
-  std::string vid = hex4(devices::kGloveUsbVendorId);
-  std::string pid = hex4(devices::kGloveUsbProductId);
+  std::string vid = hex4(devices::kImuGloveUsbVendorId);
+  std::string pid = hex4(devices::kImuGloveUsbProductId);
   std::string imu_serial, imu_path;
   std::string camera = "/dev/video0";
   std::string camera_right;
@@ -260,22 +260,22 @@ struct TrackVistArgs {
 // The glove and the camera feed the tracker until Ctrl-C or --seconds; a
 // status line each interval says what arrives and where the hand is.
 int run_track_vist_live(const TrackVistArgs& a) {
-  auto glove = a.glove.empty() ? Result<GloveDescription>(GloveDescription::vist_default())
-                               : GloveDescription::load(a.glove);
+  auto glove = a.glove.empty() ? Result<ImuGloveDescription>(ImuGloveDescription::vist_default())
+                               : ImuGloveDescription::load(a.glove);
   if (!glove) return report_error(glove.error());
   vist::VistHandSourceOptions so;
   so.tracker.hand = *parse_handedness(a.hand);  // CLI11 checked the name
   auto source = vist::VistHandSource::create(*glove, so);
   if (!source) return report_error(source.error());
 
-  devices::HidDeviceSelector sel;
+  hid::HidDeviceSelector sel;
   sel.vendor_id = parse_hex_id(a.vid);
   sel.product_id = parse_hex_id(a.pid);
   sel.serial = a.imu_serial;
   sel.path = a.imu_path;
-  auto imu_board = std::make_unique<devices::GloveDevice>(std::make_unique<devices::HidapiTransport>(sel));
-  imu_board->set_state_callback([](devices::GloveLinkState state, std::string_view detail) {
-    std::printf("[glove %s] %.*s\n", devices::to_string(state), static_cast<int>(detail.size()), detail.data());
+  auto imu_board = std::make_unique<devices::ImuGloveDevice>(std::make_unique<hid::HidapiTransport>(sel));
+  imu_board->set_state_callback([](hid::LinkState state, std::string_view detail) {
+    std::printf("[glove %s] %.*s\n", hid::to_string(state), static_cast<int>(detail.size()), detail.data());
     std::fflush(stdout);
   });
 
@@ -318,7 +318,7 @@ int run_track_vist_live(const TrackVistArgs& a) {
       const auto st = (*live)->stats();
       const PoseLookup found = (*source)->lookup(so.tracker.hand, MonotonicClock::instance().now_ns(), pose);
       std::printf("%7.1fs glove %s, %llu IMU samples; camera %s, %llu frames, %.1f markers/frame; ", elapsed,
-                  devices::to_string(st.glove_state), static_cast<unsigned long long>(st.imu_samples),
+                  hid::to_string(st.glove_state), static_cast<unsigned long long>(st.imu_samples),
                   vist::to_string(st.camera_state), static_cast<unsigned long long>(st.frames),
                   st.frames ? static_cast<double>(st.markers_detected) / static_cast<double>(st.frames) : 0.0);
       if (is_usable(found)) {
@@ -427,10 +427,7 @@ const std::vector<std::string> kChallengeNames = {"none", "occlude_half", "out_o
 
 void add_vist_commands(CLI::App& app, int& exit_code) {
   auto sargs = std::make_shared<SimVistArgs>();
-  auto* simv = app.add_subcommand(
-      "sim-vist",
-      "Simulate a subject wearing the VIST glove in front of a head-mounted stereo camera and record the session\n"
-      "(IMU samples, stereo marker detections, camera poses, ground truth and the live tracker output).");
+  auto* simv = add_command(app, "sim-vist");
   simv->add_option("--subject", sargs->subject, "simulated subject (0-14)")
       ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
       ->capture_default_str();
@@ -447,7 +444,7 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
   simv->add_flag("--force", sargs->force, "overwrite --out if it exists");
   simv->callback([sargs, &exit_code] { exit_code = run_sim_vist(*sargs); });
 
-  auto* track = subcommand_group(app, "track", "Run a tracker on recorded sensor data");
+  auto* track = add_command(app, "track");
   auto targs = std::make_shared<TrackVistArgs>();
   auto* tv = track->add_subcommand(
       "vist",
@@ -497,14 +494,8 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
     exit_code = run_track_vist(*targs);
   });
 
-  auto* bench = subcommand_group(app, "bench", "Benchmarks that measure accuracy on simulated data");
   auto args = std::make_shared<BenchVistArgs>();
-  auto* vist = bench->add_subcommand(
-      "vist",
-      "Run the VIST evaluation protocol on simulated subjects and print the accuracy:\n"
-      "free motion (a random target pose every 3 s), challenges (half the markers occluded 2 s,\n"
-      "hand out of view 3 s, distractor blobs, 10% dropped frames, IMU board unplugged 1 s) and ablations (IMU only,\n"
-      "vision only, correspondence search without IMU priors).");
+  auto* vist = add_command(app, "bench vist");
   vist->add_option("--subjects", args->subjects, "simulated subjects per case, spread over hand sizes")
       ->check(CLI::Range(1, sim::kSimSubjectCount))
       ->capture_default_str();

@@ -7,20 +7,11 @@
 #include <cstdlib>
 #include <string>
 
+#include "command_list.hpp"
+#include "command_table.hpp"
 #include "proprio/core/result.hpp"
 
 namespace proprio::cli {
-
-// A parent command several files add to (`bench vist`, `bench glove`, ...):
-// the existing one, or a new one that requires a subcommand.
-inline CLI::App* subcommand_group(CLI::App& app, const std::string& name, const std::string& description) {
-  for (CLI::App* sub : app.get_subcommands({})) {
-    if (sub->get_name() == name) return sub;
-  }
-  CLI::App* sub = app.add_subcommand(name, description);
-  sub->require_subcommand(1);
-  return sub;
-}
 
 // Prints "error: <message>" to stderr and returns the exit code 1.
 inline int report_error(const Error& error) {
@@ -55,32 +46,5 @@ extern "C" inline void on_sigint_stop(int) {
   g_sigint_stop.store(true);
   std::signal(SIGINT, SIG_DFL);
 }
-
-// Each registers its subcommand; the callback runs it and sets the exit code.
-void add_sim_hand_command(CLI::App& app, int& exit_code);
-void add_replay_command(CLI::App& app, int& exit_code);
-// `sim-vist`, `track vist` and `bench vist`.
-void add_vist_commands(CLI::App& app, int& exit_code);
-// `calibrate stereo`.
-void add_calibrate_command(CLI::App& app, int& exit_code);
-// `glove emulate|monitor|list`: the USB HID IMU glove.
-void add_glove_command(CLI::App& app, int& exit_code);
-// `sim-glove`: simulated stretch-glove sessions written as a training dataset.
-void add_sim_glove_command(CLI::App& app, int& exit_code);
-// `bench glove` and `calibrate glove`: the stretch glove's pipeline.
-void add_stretch_glove_commands(CLI::App& app, int& exit_code);
-// `stretch-board emulate|monitor|list`: the stretch glove's USB HID read-out board.
-void add_stretch_board_command(CLI::App& app, int& exit_code);
-// `layer install|uninstall|status|init-config` and `xr-probe`: built when the
-// OpenXR layer is part of the build (PROPRIO_HAVE_OPENXR_LAYER).
-// `haptics sim|mjcf|devices|test` and `bench haptics`.
-void add_haptics_commands(CLI::App& app, int& exit_code);
-void add_haptics_device_commands(CLI::App& haptics, int& exit_code);
-void add_layer_commands(CLI::App& app, int& exit_code);
-// `psychometric fit`, `stats ...` and `study ...` (proprio::study).
-void add_study_commands(CLI::App& app, int& exit_code);
-// `run SCENE`: the engine (proprio::engine).
-void add_run_command(CLI::App& app, int& exit_code);
-void add_xr_probe_command(CLI::App& app, int& exit_code);
 
 }  // namespace proprio::cli

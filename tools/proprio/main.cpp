@@ -1,55 +1,49 @@
-// proprio: the command-line entry point to Proprio's runtime.
-#include <cstdio>
-#include <string>
+// proprio: the command-line entry point to Proprio's runtime. This one main is
+// built into every CLI program: `proprio` (PROPRIO_CLI_FAMILY core, the
+// dispatcher) and the family programs in libexec; CMakeLists.txt says which
+// command files each links and defines PROPRIO_CLI_FAMILY_<NAME> for it.
+#include "cli_app.hpp"
+#include "command_list.hpp"
 
-#include "commands.hpp"
-#include "option_checks.hpp"
-#include "proprio/core/log.hpp"
+namespace {
 
-int main(int argc, char** argv) {
-  CLI::App app{
-      "Proprio: instrumented hands for VR and psychophysics.\n"
-      "Simulate, record and replay sensor-glove hand tracking. Run 'proprio <command> --help' for details."};
-  app.set_version_flag("--version", std::string("proprio ") + PROPRIO_VERSION);
-  std::string log_level = "info";
-  app.add_option("--log-level", log_level, "trace, debug, info, warn, error or off")->capture_default_str();
-  app.require_subcommand(1);
-  app.footer(
-      "Exit status: 0 success; 1 an error (a bad option or value, unreadable input, a failed run), with a message "
-      "on stderr. Some commands add codes of their own, listed in their --help.");
-
-  int exit_code = 0;
-  proprio::cli::add_sim_hand_command(app, exit_code);
-  proprio::cli::add_replay_command(app, exit_code);
-  proprio::cli::add_vist_commands(app, exit_code);
-  proprio::cli::add_calibrate_command(app, exit_code);
-  proprio::cli::add_stretch_glove_commands(app, exit_code);
-  proprio::cli::add_glove_command(app, exit_code);
-  proprio::cli::add_sim_glove_command(app, exit_code);
-  proprio::cli::add_stretch_board_command(app, exit_code);
-  proprio::cli::add_haptics_commands(app, exit_code);
+void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_code) {
+  using namespace proprio::cli;
+#ifdef PROPRIO_CLI_FAMILY_CORE
+  add_sim_hand_command(app, exit_code);
+  add_replay_command(app, exit_code);
 #ifdef PROPRIO_HAVE_STUDY
-  proprio::cli::add_study_commands(app, exit_code);
-#endif
-#ifdef PROPRIO_HAVE_ENGINE
-  proprio::cli::add_run_command(app, exit_code);
+  add_study_commands(app, exit_code);
 #endif
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
-  proprio::cli::add_layer_commands(app, exit_code);
-  proprio::cli::add_xr_probe_command(app, exit_code);
+  add_layer_commands(app, exit_code);
 #endif
-  proprio::cli::harden_numeric_options(app);
-  app.parse_complete_callback([&] {
-    if (auto s = proprio::set_log_level(log_level); !s) throw CLI::ValidationError("--log-level", s.error().message);
-  });
+#endif
+#ifdef PROPRIO_CLI_FAMILY_TRACKERS
+  add_vist_commands(app, exit_code);
+  add_calibrate_command(app, exit_code);
+  add_stretch_glove_commands(app, exit_code);
+  add_sim_glove_command(app, exit_code);
+#endif
+#ifdef PROPRIO_CLI_FAMILY_DEVICES
+  add_glove_command(app, exit_code);
+  add_stretch_board_command(app, exit_code);
+#endif
+#ifdef PROPRIO_CLI_FAMILY_HAPTICS
+  add_haptics_commands(app, exit_code);
+#endif
+#ifdef PROPRIO_CLI_FAMILY_ENGINE
+#ifdef PROPRIO_HAVE_ENGINE
+  add_run_command(app, exit_code);
+#endif
+#ifdef PROPRIO_HAVE_OPENXR_LAYER
+  add_xr_probe_command(app, exit_code);
+#endif
+#endif
+}
 
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    // CLI11's own codes (105 for an invalid value, 106 for a missing one, ...)
-    // are not ours to document: every usage error is the general error, 1.
-    const int code = app.exit(e);
-    return code == 0 ? 0 : 1;
-  }
-  return exit_code;
+}  // namespace
+
+int main(int argc, char** argv) {
+  return proprio::cli::run_cli(argc, argv, proprio::cli::Family::PROPRIO_CLI_FAMILY, add_commands);
 }

@@ -7,13 +7,10 @@
 #include <string>
 #include <vector>
 
+#include "proprio/core/data_dir.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/engine/app.hpp"
 #include "proprio/haptics/servo_loop.hpp"
-
-#ifndef PROPRIO_SOURCE_DIR
-#define PROPRIO_SOURCE_DIR "."
-#endif
 
 namespace proprio::cli {
 
@@ -22,7 +19,7 @@ struct RunArgs {
   bool xr = false, window = false, headless = false;
   std::vector<std::string> hands{"touch"};
   std::string haptics = "sim";
-  std::string device = std::string(PROPRIO_SOURCE_DIR) + "/config/haptics/band_2dof.toml";
+  std::string device = data_path("haptics/band_2dof.toml");
   bool device_given = false;             // --device on the command line (hid: else each device's kind)
   std::vector<std::string> hid_devices;  // --haptics hid: FINGER=SERIAL or FINGER=/dev/hidrawN
   std::vector<std::string> fingers{"index"};

@@ -7,7 +7,7 @@
 //  - Hooks only what the app enabled; our extensions are stripped before the
 //    runtime sees the instance create info.
 //  - xrLocateHandJointsEXT takes a shared lock and never allocates.
-#include "proprio/openxr_layer/xr_ext.hpp"  // first: it switches on XR_USE_TIMESPEC
+#include "proprio/core/xr_ext.hpp"  // first: it switches on XR_USE_TIMESPEC
 
 #include <pthread.h>
 
@@ -24,10 +24,10 @@
 
 #include "proprio/core/log.hpp"
 #include "proprio/core/xr_interop.hpp"
-#include "proprio/openxr_layer/hand_sources.hpp"
+#include "proprio/hand_sources/hand_sources.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 #include "proprio/openxr_layer/loader_interfaces.hpp"
-#include "proprio/openxr_layer/xr_ext.hpp"
+#include "proprio/core/xr_ext.hpp"
 
 namespace proprio::openxr_layer {
 namespace {
@@ -163,7 +163,7 @@ void start_sources(Instance& inst) {
   }
   inst.config = std::move(*cfg);
   for (const SourceConfig& sc : inst.config.sources) {
-    auto started = start_hand_source(sc, inst.config.max_prediction_ns);
+    auto started = hand_sources::start_hand_source(sc, inst.config.max_prediction_ns);
     if (!started) {
       logger().error("Proprio layer: {}: {}", inst.config.origin, started.error().message);
       continue;

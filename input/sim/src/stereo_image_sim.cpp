@@ -336,7 +336,7 @@ std::string StereoImageSimOptions::describe() const {
   return buf;
 }
 
-Result<StereoImageSimulator> StereoImageSimulator::create(const GloveDescription& glove, const HandShape& shape,
+Result<StereoImageSimulator> StereoImageSimulator::create(const ImuGloveDescription& glove, const HandShape& shape,
                                                           StereoImageSimOptions options) {
   if (auto st = options.validate(); !st) return st.error();
   StereoSimOptions vis = options.visibility;

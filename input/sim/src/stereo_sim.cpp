@@ -206,7 +206,7 @@ StereoMarkerSimulator::StereoMarkerSimulator(StereoRig rig, std::vector<PlacedMa
   }
 }
 
-Result<StereoMarkerSimulator> StereoMarkerSimulator::create(const GloveDescription& glove, const HandShape& shape,
+Result<StereoMarkerSimulator> StereoMarkerSimulator::create(const ImuGloveDescription& glove, const HandShape& shape,
                                                             StereoSimOptions options) {
   if (auto st = options.validate(); !st) return st.error();
   const PinholeCamera& cam = glove.rig.camera;
@@ -297,7 +297,7 @@ StereoFrame StereoMarkerSimulator::simulate(const HandPose& hand, const Pose& T_
       const PlacedMarker& m = markers_[j];
       const Pose& T_world_seg = hand.joint(m.segment);
       // The other hand is the mirror image: x -> -x in every segment frame,
-      // as in the hand model and GloveDescription::place_markers.
+      // as in the hand model and ImuGloveDescription::place_markers.
       const Vec3 p_seg = mirror ? Vec3(-m.p_in_segment.x(), m.p_in_segment.y(), m.p_in_segment.z()) : m.p_in_segment;
       const Vec3 n_seg =
           mirror ? Vec3(-m.normal_in_segment.x(), m.normal_in_segment.y(), m.normal_in_segment.z()) : m.normal_in_segment;

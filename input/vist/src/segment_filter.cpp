@@ -48,7 +48,7 @@ bool state_finite(const SegmentState& s) {
 
 // --- Model -------------------------------------------------------------------
 
-Result<VistModel> VistModel::build(const GloveDescription& glove, const HandShape& nominal_shape, Handedness hand) {
+Result<VistModel> VistModel::build(const ImuGloveDescription& glove, const HandShape& nominal_shape, Handedness hand) {
   VistModel m;
   m.hand = hand;
   m.nominal_shape = nominal_shape;

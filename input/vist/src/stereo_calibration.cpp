@@ -851,9 +851,9 @@ std::string rig_toml_snippet(const StereoRig& rig) {
     << "cx_px = " << fixed3(c.cx_px) << "\n"
     << "cy_px = " << fixed3(c.cy_px) << "\n"
     << "baseline_mm = " << fixed3(rig.baseline_m * 1e3) << "\n";
-  // The rate and the mount exactly as GloveDescription::to_toml writes them (a
+  // The rate and the mount exactly as ImuGloveDescription::to_toml writes them (a
   // pure downward tilt as such, anything else as a rotation vector).
-  GloveDescription g = GloveDescription::vist_default();
+  ImuGloveDescription g = ImuGloveDescription::vist_default();
   g.rig = rig;
   const std::string all = g.to_toml();
   std::istringstream in(all.substr(all.find("\n[rig]\n") + 1));

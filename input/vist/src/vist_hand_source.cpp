@@ -25,7 +25,7 @@ std::string VistSourceStats::describe() const {
   return buf + tracker.describe();
 }
 
-Result<std::unique_ptr<VistHandSource>> VistHandSource::create(const GloveDescription& glove,
+Result<std::unique_ptr<VistHandSource>> VistHandSource::create(const ImuGloveDescription& glove,
                                                                VistHandSourceOptions options) {
   if (options.max_queued_inputs < 16) {
     return make_error(Errc::invalid_argument, "VIST source: max_queued_inputs must be at least 16");

@@ -27,7 +27,7 @@ std::string VistLiveOptions::describe() const {
 }
 
 std::string VistLiveStats::describe() const {
-  std::string s = fmt::format("glove {}, {} IMU samples", devices::to_string(glove_state), imu_samples);
+  std::string s = fmt::format("glove {}, {} IMU samples", hid::to_string(glove_state), imu_samples);
   if (imu_unknown_sensor > 0) s += fmt::format(" ({} from IMUs the glove file does not have)", imu_unknown_sensor);
   s += fmt::format("; camera {}, {} stereo frames, {:.1f} markers per frame, detection {:.2f} ms per pair",
                    to_string(camera_state), frames,
@@ -39,8 +39,8 @@ std::string VistLiveStats::describe() const {
   return s;
 }
 
-Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create(VistHandSource& sink, const GloveDescription& glove,
-                                                             std::unique_ptr<devices::GloveDevice> glove_device,
+Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create(VistHandSource& sink, const ImuGloveDescription& glove,
+                                                             std::unique_ptr<devices::ImuGloveDevice> glove_device,
                                                              std::unique_ptr<StereoCamera> camera,
                                                              VistLiveOptions options, HeadPoseProvider head,
                                                              const Clock& clock) {
@@ -67,7 +67,7 @@ Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create(VistHandSource& sin
 }
 
 VistLiveInput::VistLiveInput(VistHandSource& sink, std::size_t imu_count, Pose T_head_leftcam,
-                             std::unique_ptr<devices::GloveDevice> glove, std::unique_ptr<StereoCamera> camera,
+                             std::unique_ptr<devices::ImuGloveDevice> glove, std::unique_ptr<StereoCamera> camera,
                              MarkerDetector detector, VistLiveOptions options, HeadPoseProvider head,
                              const Clock& clock)
     : sink_(sink),
@@ -81,7 +81,7 @@ VistLiveInput::VistLiveInput(VistHandSource& sink, std::size_t imu_count, Pose T
       clock_(clock) {
   // The glove's reader thread pushes straight into the tracker's queue: one
   // hand-off, and the samples keep the order the board sent them in.
-  glove_->set_sample_callback([this](const devices::GloveSample& g) {
+  glove_->set_sample_callback([this](const devices::ImuGloveSample& g) {
     if (g.imu.sensor_id >= imu_count_) {
       imu_unknown_.fetch_add(1, std::memory_order_relaxed);
       return;

@@ -94,7 +94,7 @@ Result<VistSessionReader> VistSessionReader::open(const std::filesystem::path& p
   const std::string& meta = s.reader_.find_stream(kVistMarkersStream)->meta;
   try {
     const auto j = nlohmann::json::parse(meta);
-    auto glove = GloveDescription::parse(j.at("glove_toml").get<std::string>(), path.string() + " (glove_toml)");
+    auto glove = ImuGloveDescription::parse(j.at("glove_toml").get<std::string>(), path.string() + " (glove_toml)");
     if (!glove) return glove.error();
     s.info_.glove = std::move(*glove);
     const auto hand = j.value("hand", std::string("right"));

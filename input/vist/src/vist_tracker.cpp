@@ -76,7 +76,7 @@ std::string VistStats::describe() const {
   return s.str();
 }
 
-Result<VistTracker> VistTracker::create(const GloveDescription& glove, VistTrackerOptions options) {
+Result<VistTracker> VistTracker::create(const ImuGloveDescription& glove, VistTrackerOptions options) {
   if (auto st = options.validate(); !st) return st.error();
   auto shape = HandShape::from_measurements(options.nominal_hand_length_m, options.nominal_hand_width_m);
   if (!shape) return shape.error();
@@ -110,7 +110,7 @@ Result<VistTracker> VistTracker::create(const GloveDescription& glove, VistTrack
                      std::move(*acquisition));
 }
 
-VistTracker::VistTracker(const GloveDescription& glove, VistTrackerOptions options, VistFilter filter,
+VistTracker::VistTracker(const ImuGloveDescription& glove, VistTrackerOptions options, VistFilter filter,
                          StereoMatcher matcher, CorrespondenceSearch search, CorrespondenceSearch acquisition_search)
     : glove_(glove),
       options_(std::move(options)),

@@ -71,7 +71,7 @@ struct ScaleTruth {
   Vec3 scale = Vec3::Ones();
   Vec3 leverage = Vec3::Zero();  // RMS nominal lever per axis (m): how well the markers span the axis
 };
-std::vector<ScaleTruth> true_scales(const vist::VistModel& model, const GloveDescription& glove,
+std::vector<ScaleTruth> true_scales(const vist::VistModel& model, const ImuGloveDescription& glove,
                                     const HandShape& shape, Handedness hand) {
   const auto imus = glove.place_imus(shape, hand);
   const auto markers = glove.place_markers(shape, hand);
@@ -153,7 +153,7 @@ ErrorSummary summarize(std::vector<float>& e) {
   return s;
 }
 
-Result<SessionResult> run_session(const GloveDescription& glove, const SessionSpec& spec,
+Result<SessionResult> run_session(const ImuGloveDescription& glove, const SessionSpec& spec,
                                   const vist::VistTrackerOptions& base_options) {
   if (spec.mode == FrameMode::images && spec.challenge != Challenge::none &&
       spec.challenge != Challenge::dropped_frames && spec.challenge != Challenge::distractors) {

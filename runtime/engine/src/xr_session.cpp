@@ -25,16 +25,13 @@
 #include "proprio/core/log.hpp"
 #include "proprio/core/xr_interop.hpp"
 #include "proprio/engine/xr_vulkan.hpp"
+#include "xr_util.hpp"
 
 namespace proprio::engine {
 namespace {
 
-bool has_extension(const std::vector<XrExtensionProperties>& exts, const char* name) {
-  for (const auto& e : exts) {
-    if (std::strcmp(e.extensionName, name) == 0) return true;
-  }
-  return false;
-}
+using detail::has_extension;
+using detail::xr_load;
 
 std::vector<XrExtensionProperties> runtime_extensions() {
   std::uint32_t count = 0;
@@ -42,13 +39,6 @@ std::vector<XrExtensionProperties> runtime_extensions() {
   std::vector<XrExtensionProperties> exts(count, XrExtensionProperties{XR_TYPE_EXTENSION_PROPERTIES});
   if (XR_FAILED(xrEnumerateInstanceExtensionProperties(nullptr, count, &count, exts.data()))) return {};
   return exts;
-}
-
-template <typename Fn>
-Fn load(XrInstance instance, const char* name) {
-  PFN_xrVoidFunction f = nullptr;
-  if (XR_FAILED(xrGetInstanceProcAddr(instance, name, &f))) return nullptr;
-  return reinterpret_cast<Fn>(f);
 }
 
 // Every OpenXR handle the session makes, destroyed in reverse order. The
@@ -123,8 +113,9 @@ Result<AppReport> App::Impl::run_xr() {
     return e;
   }
 
-  auto to_timespec = timespec_ext ? load<PFN_xrConvertTimeToTimespecTimeKHR>(xr.instance, "xrConvertTimeToTimespecTimeKHR")
-                                  : nullptr;
+  auto to_timespec = timespec_ext
+                         ? xr_load<PFN_xrConvertTimeToTimespecTimeKHR>(xr.instance, "xrConvertTimeToTimespecTimeKHR")
+                         : nullptr;
 
   // Vulkan through the runtime.
   render::ContextOptions base;
@@ -236,9 +227,9 @@ Result<AppReport> App::Impl::run_xr() {
     XrSystemHandTrackingPropertiesEXT htp{XR_TYPE_SYSTEM_HAND_TRACKING_PROPERTIES_EXT};
     XrSystemProperties sp{XR_TYPE_SYSTEM_PROPERTIES};
     sp.next = &htp;
-    auto create_tracker = load<PFN_xrCreateHandTrackerEXT>(xr.instance, "xrCreateHandTrackerEXT");
-    locate_hand = load<PFN_xrLocateHandJointsEXT>(xr.instance, "xrLocateHandJointsEXT");
-    xr.destroy_hand_tracker = load<PFN_xrDestroyHandTrackerEXT>(xr.instance, "xrDestroyHandTrackerEXT");
+    auto create_tracker = xr_load<PFN_xrCreateHandTrackerEXT>(xr.instance, "xrCreateHandTrackerEXT");
+    locate_hand = xr_load<PFN_xrLocateHandJointsEXT>(xr.instance, "xrLocateHandJointsEXT");
+    xr.destroy_hand_tracker = xr_load<PFN_xrDestroyHandTrackerEXT>(xr.instance, "xrDestroyHandTrackerEXT");
     if (XR_SUCCEEDED(xrGetSystemProperties(xr.instance, system, &sp)) && htp.supportsHandTracking && create_tracker &&
         locate_hand) {
       for (int h = 0; h < 2; ++h) {

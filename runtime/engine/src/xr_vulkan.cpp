@@ -9,17 +9,11 @@
 
 #include <fmt/format.h>
 
+#include "xr_util.hpp"
+
 namespace proprio::engine {
-namespace {
 
-template <typename Fn>
-Fn load(XrInstance instance, const char* name) {
-  PFN_xrVoidFunction f = nullptr;
-  if (XR_FAILED(xrGetInstanceProcAddr(instance, name, &f))) return nullptr;
-  return reinterpret_cast<Fn>(f);
-}
-
-}  // namespace
+using detail::xr_load;
 
 Status check_xr_vulkan_min_version(XrVersion runtime_min_api_version) {
   const auto major = XR_VERSION_MAJOR(runtime_min_api_version);
@@ -47,10 +41,10 @@ Error xr_call_error(XrInstance instance, const char* what, XrResult result) {
 Result<render::ContextOptions> xr_vulkan_context_options(XrInstance instance, XrSystemId system,
                                                          render::ContextOptions base) {
   const auto get_requirements =
-      load<PFN_xrGetVulkanGraphicsRequirements2KHR>(instance, "xrGetVulkanGraphicsRequirements2KHR");
-  const auto create_vk_instance = load<PFN_xrCreateVulkanInstanceKHR>(instance, "xrCreateVulkanInstanceKHR");
-  const auto get_vk_device = load<PFN_xrGetVulkanGraphicsDevice2KHR>(instance, "xrGetVulkanGraphicsDevice2KHR");
-  const auto create_vk_device = load<PFN_xrCreateVulkanDeviceKHR>(instance, "xrCreateVulkanDeviceKHR");
+      xr_load<PFN_xrGetVulkanGraphicsRequirements2KHR>(instance, "xrGetVulkanGraphicsRequirements2KHR");
+  const auto create_vk_instance = xr_load<PFN_xrCreateVulkanInstanceKHR>(instance, "xrCreateVulkanInstanceKHR");
+  const auto get_vk_device = xr_load<PFN_xrGetVulkanGraphicsDevice2KHR>(instance, "xrGetVulkanGraphicsDevice2KHR");
+  const auto create_vk_device = xr_load<PFN_xrCreateVulkanDeviceKHR>(instance, "xrCreateVulkanDeviceKHR");
   if (!get_requirements || !create_vk_instance || !get_vk_device || !create_vk_device) {
     return make_error(Errc::unsupported,
                       "the OpenXR runtime lists XR_KHR_vulkan_enable2 but lacks its functions (or the instance did "

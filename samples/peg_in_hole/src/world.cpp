@@ -5,18 +5,15 @@
 #include <algorithm>
 #include <cmath>
 
+#include "proprio/core/data_dir.hpp"
 #include "proprio/haptics/contact_sim.hpp"
 #include "proprio/haptics/emulated_fingertip.hpp"
-
-#ifndef PROPRIO_SOURCE_DIR
-#define PROPRIO_SOURCE_DIR "."
-#endif
 
 namespace proprio::peg_in_hole {
 
 Result<std::shared_ptr<const haptics::FingertipDeviceModel>> load_device_model(const PegInHoleConfig& config) {
   const std::filesystem::path path = config.devices.model.empty()
-                                         ? std::filesystem::path(PROPRIO_SOURCE_DIR) / "config/haptics/platform_3dof.toml"
+                                         ? std::filesystem::path(data_path("haptics/platform_3dof.toml"))
                                          : config.devices.model;
   auto m = haptics::load_device_model(path);
   if (!m) return m.error().with_context("peg-in-hole fingertip device model");

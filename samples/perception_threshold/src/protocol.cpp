@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "proprio/core/config.hpp"
+#include "proprio/core/data_dir.hpp"
 
 namespace proprio::perception {
 namespace {
@@ -96,6 +97,12 @@ Status PerceptionProtocol::validate() const {
                                               "scene.cylinder_elevation_deg in [-90, 90]");
   }
   return observer.validate();
+}
+
+PerceptionProtocol PerceptionProtocol::defaults() {
+  PerceptionProtocol p;
+  p.design_file = data_path("studies/perception_threshold.toml");
+  return p;
 }
 
 PerceptionProtocol PerceptionProtocol::defaults(const std::filesystem::path& source_dir) {

@@ -24,11 +24,13 @@
 
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/fingertip_device/fingertip_protocol.hpp"
 #include "proprio/haptics/fingertip_force.hpp"
 
 namespace proprio::haptics {
 
-inline constexpr std::size_t kMaxDeviceMotors = 3;
+// The wire protocol carries at most this many motors; a model cannot drive more.
+inline constexpr std::size_t kMaxDeviceMotors = devices::kFingertipMaxMotors;
 
 // Output-shaft angles, rad, motor i in rad[i]; entries past motor_count() are
 // unused and zero. (force_vector carries newtons here: see its model.)

@@ -1,7 +1,7 @@
 #pragma once
 // Fingertip sinks: where the servo loop's per-finger commands go.
 //
-// EmulatedFingertip runs a device emulator (input/devices/fingertip_emulator:
+// EmulatedFingertip runs a device emulator (haptics/fingertip_device/fingertip_emulator:
 // DC motors, gearbox, PD control at 1 kHz, device-side watchdog) in process,
 // stepped by the servo loop itself, with the device model (haptics) as its
 // mechanics: the motors wind against model.load_torques() and the force
@@ -14,8 +14,8 @@
 #include <memory>
 #include <string>
 
-#include "proprio/devices/fingertip_device.hpp"
-#include "proprio/devices/fingertip_emulator.hpp"
+#include "proprio/fingertip_device/fingertip_device.hpp"
+#include "proprio/fingertip_device/fingertip_emulator.hpp"
 #include "proprio/haptics/servo_loop.hpp"
 
 namespace proprio::haptics {

@@ -28,8 +28,8 @@
 #include "proprio/core/hand_joint.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
-#include "proprio/devices/fingertip_device.hpp"
-#include "proprio/devices/hid_transport.hpp"
+#include "proprio/fingertip_device/fingertip_device.hpp"
+#include "proprio/hid/hid_transport.hpp"
 #include "proprio/haptics/servo_loop.hpp"
 
 namespace proprio::haptics {
@@ -54,19 +54,19 @@ struct HidChannelOptions {
 };
 
 // Opens one listed device (hidapi for real ones; tests hand in emulators).
-using HidTransportFactory = std::function<std::unique_ptr<devices::HidTransport>(const devices::HidDeviceInfo&)>;
-std::unique_ptr<devices::HidTransport> open_hidapi_transport(const devices::HidDeviceInfo& info);
+using HidTransportFactory = std::function<std::unique_ptr<hid::HidTransport>(const hid::HidDeviceInfo&)>;
+std::unique_ptr<hid::HidTransport> open_hidapi_transport(const hid::HidDeviceInfo& info);
 
 struct HidChannel {
   ServoChannel channel;               // its sink forwards to the device
-  devices::HidDeviceInfo listed;      // how the OS listed it
+  hid::HidDeviceInfo listed;      // how the OS listed it
   devices::FingertipDeviceInfo info;  // what it reported
   std::string describe() const;
 };
 
 // available: the devices to choose from, usually enumerate_fingertip_devices().
 Result<std::vector<HidChannel>> open_hid_channels(const HidChannelOptions& options,
-                                                  std::span<const devices::HidDeviceInfo> available,
+                                                  std::span<const hid::HidDeviceInfo> available,
                                                   const HidTransportFactory& open = open_hidapi_transport);
 
 }  // namespace proprio::haptics

@@ -25,7 +25,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_pose.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/core/recording.hpp"
@@ -126,7 +126,7 @@ struct ImuReading {
 // Drawn once per simulator from its seed, per IMU.
 struct ImuMounting {
   std::uint16_t sensor_id = 0;
-  std::size_t glove_imu_index = 0;  // PlacedImu::index (into GloveDescription::imus)
+  std::size_t glove_imu_index = 0;  // PlacedImu::index (into ImuGloveDescription::imus)
   HandJoint segment = HandJoint::wrist;
   Pose T_segment_imu_nominal;  // as placed
   Pose T_segment_imu;          // true: nominal composed with the misalignment
@@ -161,7 +161,7 @@ using HandPoseFunction = std::function<HandPose(TimeNs)>;
 class ImuSimulator {
  public:
   // The IMUs sit on the segments of the hand the pose function returns
-  // (typically GloveDescription::place_imus(shape)); sensor_id i is imus[i].
+  // (typically ImuGloveDescription::place_imus(shape)); sensor_id i is imus[i].
   // The first tick is at first_tick_ns. Errors: invalid options, no IMUs, or
   // more than 65535 of them (Errc::invalid_argument).
   static Result<ImuSimulator> create(HandPoseFunction poses, std::vector<PlacedImu> imus, ImuNoiseOptions options,

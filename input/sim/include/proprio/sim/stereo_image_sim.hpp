@@ -56,7 +56,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_pose.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/sim/stereo_sim.hpp"
@@ -186,7 +186,7 @@ class StereoImageSimulator {
  public:
   // Validates the options and the rig, builds the detection-level simulator
   // for the glove on this hand shape, and draws the wall texture.
-  static Result<StereoImageSimulator> create(const GloveDescription& glove, const HandShape& shape,
+  static Result<StereoImageSimulator> create(const ImuGloveDescription& glove, const HandShape& shape,
                                              StereoImageSimOptions options = {});
   // Renders around an existing detection-level simulator (its options must
   // have no centroid noise and no shuffle; see StereoImageSimOptions::visibility,

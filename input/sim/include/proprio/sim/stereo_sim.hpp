@@ -36,7 +36,7 @@
 #include <string_view>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_pose.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"
@@ -161,7 +161,7 @@ HandCapsules hand_capsules(const HandPose& hand_in_world, double forearm_length_
 
 class StereoMarkerSimulator {
  public:
-  // Markers as GloveDescription::place_markers(shape, markers_hand) gives
+  // Markers as ImuGloveDescription::place_markers(shape, markers_hand) gives
   // them, in their segment frames. A pose of the other hand sees them
   // mirrored (x -> -x in every segment frame, as HandModel and
   // place_markers mirror), so one simulator serves both hands. Options must
@@ -169,7 +169,7 @@ class StereoMarkerSimulator {
   StereoMarkerSimulator(StereoRig rig, std::vector<PlacedMarker> markers, StereoSimOptions options = {},
                         Handedness markers_hand = Handedness::right);
   // Validates the rig and options and places the glove's markers on this hand.
-  static Result<StereoMarkerSimulator> create(const GloveDescription& glove, const HandShape& shape,
+  static Result<StereoMarkerSimulator> create(const ImuGloveDescription& glove, const HandShape& shape,
                                               StereoSimOptions options = {});
 
   // The blobs both cameras see of a hand at time t, with the head (and so the

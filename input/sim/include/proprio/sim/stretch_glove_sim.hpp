@@ -53,7 +53,7 @@
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/random.hpp"
 #include "proprio/core/result.hpp"
-#include "proprio/core/stretch_glove_layout.hpp"
+#include "proprio/glove_descriptions/stretch_glove_layout.hpp"
 #include "proprio/core/time.hpp"
 #include "proprio/sim/hand_motion.hpp"
 

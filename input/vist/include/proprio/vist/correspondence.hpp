@@ -31,7 +31,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_pose.hpp"
 #include "proprio/core/math.hpp"
 #include "proprio/core/result.hpp"

@@ -46,7 +46,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"
 

@@ -47,7 +47,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/math.hpp"
 #include "proprio/core/result.hpp"
@@ -112,7 +112,7 @@ struct VistModel {
   // thesis's six joints and seven rotational constraints, wherever both
   // segments are instrumented. Errors when a segment has two IMUs, a marker
   // sits on a segment without an IMU, or the shape is not usable.
-  static Result<VistModel> build(const GloveDescription& glove, const HandShape& nominal_shape, Handedness hand);
+  static Result<VistModel> build(const ImuGloveDescription& glove, const HandShape& nominal_shape, Handedness hand);
   // Index of the segment riding on this joint, or -1.
   int segment_index(HandJoint j) const noexcept;
   std::string describe() const;

@@ -28,7 +28,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/math.hpp"
 #include "proprio/core/result.hpp"
 
@@ -190,7 +190,7 @@ Result<StereoCalibration> calibrate_stereo_folder(const std::filesystem::path& d
 // The [rig] table of a glove file (docs/vist-glove.md) for this rig: focal
 // lengths, principal point and baseline with three decimals (0.001 px and
 // 0.001 mm, far below calibration error), the rate and the mount as
-// GloveDescription::to_toml writes them.
+// ImuGloveDescription::to_toml writes them.
 std::string rig_toml_snippet(const StereoRig& rig);
 
 // Undistort-and-rectify maps for whole images (initUndistortRectifyMap).

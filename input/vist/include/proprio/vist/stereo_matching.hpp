@@ -39,7 +39,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/math.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"

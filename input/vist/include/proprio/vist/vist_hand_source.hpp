@@ -47,7 +47,7 @@ struct VistSourceStats {
 
 class VistHandSource final : public HandSource {
  public:
-  static Result<std::unique_ptr<VistHandSource>> create(const GloveDescription& glove,
+  static Result<std::unique_ptr<VistHandSource>> create(const ImuGloveDescription& glove,
                                                         VistHandSourceOptions options = {});
   ~VistHandSource() override;
   VistHandSource(const VistHandSource&) = delete;

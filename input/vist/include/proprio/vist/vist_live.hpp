@@ -1,17 +1,17 @@
 #pragma once
 // VIST with a real glove: the wiring from the devices to the tracker.
 //
-//   IMU board --USB HID--> GloveDevice (reader thread: decode, ClockSync)
+//   IMU board --USB HID--> ImuGloveDevice (reader thread: decode, hid::ClockSync)
 //        --sample callback--> VistHandSource::push_imu
 //   stereo camera --> StereoCamera --> camera thread: MarkerDetector on both
 //        images --> VistHandSource::push_stereo_frame (at the capture time,
 //        with the camera's pose in the world at that time)
 //
-// Every timestamp is CLOCK_MONOTONIC: GloveDevice maps the board's µs
+// Every timestamp is CLOCK_MONOTONIC: ImuGloveDevice maps the board's µs
 // counter there and StereoCamera stamps device frames there, so the tracker
 // sees one time base and fuses late frames at their capture time.
 //
-// Where the camera is: the stereo rig sits on the head (GloveDescription's
+// Where the camera is: the stereo rig sits on the head (ImuGloveDescription's
 // rig.T_head_leftcam). With an HMD, pass a head pose provider (the engine
 // asks OpenXR for the VIEW space at the frame's time); without one the head
 // is fixed at options.T_world_head_fixed, i.e. the camera does not move.
@@ -21,7 +21,7 @@
 // file_latency_s has come, as a live camera would deliver it. The end of the
 // file ends the camera thread; the glove keeps streaming.
 //
-// Unplugs: the glove reconnects on its own (GloveDevice); a camera that
+// Unplugs: the glove reconnects on its own (ImuGloveDevice); a camera that
 // stops delivering is reopened by StereoCamera and, failing that, its thread
 // ends with the state `failed`. Neither stops the other: the tracker runs on
 // what arrives and re-acquires when both are back.
@@ -34,7 +34,7 @@
 
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
-#include "proprio/devices/glove_device.hpp"
+#include "proprio/imu_glove_board/imu_glove_device.hpp"
 #include "proprio/vist/marker_detection.hpp"
 #include "proprio/vist/stereo_camera.hpp"
 #include "proprio/vist/vist_hand_source.hpp"
@@ -57,7 +57,7 @@ struct VistLiveOptions {
 };
 
 struct VistLiveStats {
-  devices::GloveLinkState glove_state = devices::GloveLinkState::stopped;
+  hid::LinkState glove_state = hid::LinkState::stopped;
   CameraState camera_state = CameraState::stopped;
   std::string camera_error;  // why the camera thread ended, if it did
   std::uint64_t imu_samples = 0;          // pushed to the tracker
@@ -75,8 +75,8 @@ class VistLiveInput {
   // Takes the glove and the camera (both not started yet) and feeds `sink`,
   // which must outlive this object. The sink's glove description says how
   // many IMUs there are and which camera the detector expects.
-  static Result<std::unique_ptr<VistLiveInput>> create(VistHandSource& sink, const GloveDescription& glove,
-                                                       std::unique_ptr<devices::GloveDevice> glove_device,
+  static Result<std::unique_ptr<VistLiveInput>> create(VistHandSource& sink, const ImuGloveDescription& glove,
+                                                       std::unique_ptr<devices::ImuGloveDevice> glove_device,
                                                        std::unique_ptr<StereoCamera> camera,
                                                        VistLiveOptions options = {},
                                                        HeadPoseProvider head = nullptr,
@@ -92,11 +92,11 @@ class VistLiveInput {
   bool camera_running() const noexcept { return camera_running_.load(std::memory_order_acquire); }
 
   VistLiveStats stats() const;
-  devices::GloveDevice& glove_device() noexcept { return *glove_; }
+  devices::ImuGloveDevice& glove_device() noexcept { return *glove_; }
 
  private:
   VistLiveInput(VistHandSource& sink, std::size_t imu_count, Pose T_head_leftcam,
-                std::unique_ptr<devices::GloveDevice> glove, std::unique_ptr<StereoCamera> camera,
+                std::unique_ptr<devices::ImuGloveDevice> glove, std::unique_ptr<StereoCamera> camera,
                 MarkerDetector detector, VistLiveOptions options, HeadPoseProvider head, const Clock& clock);
   void camera_loop();
   bool wait_until(TimeNs t_ns);  // false: stopping
@@ -104,7 +104,7 @@ class VistLiveInput {
   VistHandSource& sink_;
   std::size_t imu_count_;
   Pose T_head_leftcam_;
-  std::unique_ptr<devices::GloveDevice> glove_;
+  std::unique_ptr<devices::ImuGloveDevice> glove_;
   std::unique_ptr<StereoCamera> camera_;
   MarkerDetector detector_;
   VistLiveOptions options_;

@@ -18,7 +18,7 @@
 #include <string>
 #include <variant>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_pose.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"
@@ -30,7 +30,7 @@ inline constexpr const char* kVistMarkersStream = "cam/vist/markers";
 inline constexpr const char* kVistLeftCamStream = "cam/vist/leftcam";
 
 struct VistSessionInfo {
-  GloveDescription glove;
+  ImuGloveDescription glove;
   Handedness hand = Handedness::right;
   double nominal_hand_length_m = 0.19;
   double nominal_hand_width_m = 0.10;

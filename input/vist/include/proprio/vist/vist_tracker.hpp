@@ -28,7 +28,7 @@
 #include <string>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/hand_pose.hpp"
 #include "proprio/core/recording.hpp"
@@ -120,7 +120,7 @@ struct FrameReport {
 
 class VistTracker {
  public:
-  static Result<VistTracker> create(const GloveDescription& glove, VistTrackerOptions options = {});
+  static Result<VistTracker> create(const ImuGloveDescription& glove, VistTrackerOptions options = {});
 
   // Feed data in arrival order. IMU samples of different IMUs may interleave
   // in any order; each IMU's own samples must come in time order (others are
@@ -153,7 +153,7 @@ class VistTracker {
                    HandPose& out);
 
  private:
-  VistTracker(const GloveDescription& glove, VistTrackerOptions options, VistFilter filter, StereoMatcher matcher,
+  VistTracker(const ImuGloveDescription& glove, VistTrackerOptions options, VistFilter filter, StereoMatcher matcher,
               CorrespondenceSearch search, CorrespondenceSearch acquisition_search);
   struct PendingFrame {
     TimeNs capture_ns = 0;
@@ -176,7 +176,7 @@ class VistTracker {
   void ensure_shape(const SegmentState& dorsum);
   Vec3 mean_accel(std::size_t segment, TimeNs around_ns) const;
 
-  GloveDescription glove_;
+  ImuGloveDescription glove_;
   VistTrackerOptions options_;
   StereoRig rig_;
   VistFilter filter_;

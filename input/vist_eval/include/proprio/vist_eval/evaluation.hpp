@@ -16,7 +16,7 @@
 #include <string_view>
 #include <vector>
 
-#include "proprio/core/glove_description.hpp"
+#include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/vist/vist_session.hpp"
@@ -105,8 +105,8 @@ struct SessionResult {
   std::vector<float> keypoint_errors_mm, joint_errors_mm;
 };
 
-// Runs one session. `glove` is usually GloveDescription::vist_default().
-Result<SessionResult> run_session(const GloveDescription& glove, const SessionSpec& spec,
+// Runs one session. `glove` is usually ImuGloveDescription::vist_default().
+Result<SessionResult> run_session(const ImuGloveDescription& glove, const SessionSpec& spec,
                                   const vist::VistTrackerOptions& base_options = {});
 
 // Pools sessions of one kind: sample-weighted errors, worst calibration.

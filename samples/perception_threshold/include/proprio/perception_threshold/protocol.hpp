@@ -69,7 +69,10 @@ struct PerceptionProtocol {
   std::string describe() const;
   Status validate() const;
 
-  // The published protocol with config/studies/perception_threshold.toml as its design.
+  // The published protocol with the shipped studies/perception_threshold.toml
+  // (proprio::data_path: installed, or the source tree's config/) as its design.
+  static PerceptionProtocol defaults();
+  // The same with <source_dir>/config/studies/perception_threshold.toml.
   static PerceptionProtocol defaults(const std::filesystem::path& source_dir);
   // A protocol file (config/samples/perception_threshold.toml documents the
   // keys); `design` is resolved relative to the file.

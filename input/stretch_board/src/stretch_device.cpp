@@ -1,0 +1,186 @@
+#include "proprio/stretch_board/stretch_device.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <string>
+
+#include "proprio/core/log.hpp"
+
+namespace proprio::devices {
+
+hid::HidDeviceSelector stretch_board_selector() {
+  hid::HidDeviceSelector sel;
+  sel.vendor_id = kStretchUsbVendorId;
+  sel.product_id = kStretchUsbProductId;
+  sel.usage_page = kStretchHidUsagePage;
+  return sel;
+}
+
+namespace {
+
+hid::LinkThreadOptions link_options(const StretchDeviceOptions& o) {
+  hid::LinkThreadOptions l;
+  l.read_timeout_ns = o.read_timeout_ns;
+  l.reconnect_backoff_min_ns = o.reconnect_backoff_min_ns;
+  l.reconnect_backoff_max_ns = o.reconnect_backoff_max_ns;
+  l.max_burst = kStretchMaxBurst;
+  return l;
+}
+
+}  // namespace
+
+StretchDevice::StretchDevice(std::unique_ptr<hid::HidTransport> transport, StretchDeviceOptions options,
+                             const Clock& clock)
+    : options_(options),
+      clock_(clock),
+      stream_(options_.stream),
+      clock_sync_(options_.clock),
+      outlet_(options_.queue_capacity),
+      link_(std::move(transport), link_options(options_), clock, *this, stats_) {
+  pending_.reserve(kStretchMaxBurst * kStretchMeasurementsPerReport);
+}
+
+StretchDevice::~StretchDevice() { stop(); }
+
+Status StretchDevice::start() {
+  if (running()) {
+    return make_error(Errc::invalid_argument, "StretchDevice::start: the reader thread is already running");
+  }
+  if (!link_.has_transport()) return make_error(Errc::invalid_argument, "StretchDevice::start: no transport");
+  link_.start();
+  return {};
+}
+
+StretchDeviceStats StretchDevice::stats() {
+  if (const StretchDeviceStats* newest = published_.read()) consumer_stats_ = *newest;
+  return consumer_stats_;
+}
+
+void StretchDevice::publish() {
+  stats_.record_clock(clock_sync_);
+  published_.publish(stats_);
+}
+
+bool StretchDevice::before_read() {
+  for (const StretchCommand& c : commands_.take()) {
+    if (auto s = link_.transport().write(encode_stretch_command(c)); !s) {
+      ++stats_.write_failures;
+      logger().warn("stretch board: sending command {} failed: {}", static_cast<int>(c.op), s.error().message);
+    }
+  }
+  return true;
+}
+
+Result<std::string> StretchDevice::on_open(hid::HidTransport& transport) {
+  layout_warned_ = false;
+  last_data_ns_ = clock_.now_ns();
+  std::string detail = transport.describe();
+  if (options_.query_info) {
+    std::array<std::uint8_t, kStretchInfoReportSize> buf{};
+    auto n = transport.get_feature(static_cast<std::uint8_t>(StretchReportId::device_info), buf);
+    if (n) {
+      auto info = decode_stretch_info_report(std::span<const std::uint8_t>(buf).first(std::min(*n, buf.size())));
+      if (info) {
+        stats_.have_info = true;
+        stats_.info = *info;
+        char text[200];
+        std::snprintf(text, sizeof text, ": firmware %u.%u.%u, %u x %u strips (%zu combinations) at %u/s, full scale %.1f pF%s",
+                      info->firmware[0], info->firmware[1], info->firmware[2], info->top_strips, info->bottom_strips,
+                      info->combination_count(), info->rate_hz, stretch_count_to_pf(info->full_scale_ff),
+                      info->streaming ? "" : ", not streaming");
+        detail += text;
+        const StretchStreamOptions& so = options_.stream;
+        if ((so.expected_top_strips && info->top_strips != so.expected_top_strips) ||
+            (so.expected_bottom_strips && info->bottom_strips != so.expected_bottom_strips)) {
+          std::snprintf(text, sizeof text, "; WRONG LAYOUT: the layout expects %u x %u strips, so its "
+                        "measurements will be refused", so.expected_top_strips, so.expected_bottom_strips);
+          detail += text;
+        }
+      } else {
+        logger().warn("stretch board: device info report unreadable: {}", info.error().message);
+      }
+    } else {
+      logger().debug("stretch board: no device info report: {}", n.error().message);
+    }
+  }
+  return detail;
+}
+
+void StretchDevice::on_silence(TimeNs now) {
+  if (options_.restart_after_silence_ns > 0 && now - last_data_ns_ >= options_.restart_after_silence_ns) {
+    StretchCommand start;
+    start.op = StretchCommandOp::start_streaming;
+    start.token = next_token_++;
+    if (auto s = link_.transport().write(encode_stretch_command(start)); !s) {
+      ++stats_.write_failures;
+    } else {
+      ++stats_.restart_commands;
+    }
+    last_data_ns_ = now;  // give the board another silence period before asking again
+  }
+  publish();
+}
+
+void StretchDevice::end_burst(bool link_lost) {
+  deliver_pending();
+  if (link_lost) return;  // the loss report publishes
+  stats_.stream = stream_.stats();
+  publish();
+}
+
+void StretchDevice::on_report(std::span<const std::uint8_t> report, TimeNs receive_ns) {
+  std::array<StretchSample, kStretchMeasurementsPerReport> samples;
+  const StretchPushResult r = stream_.push(report, samples, receive_ns);
+  const bool data = r.verdict == StretchReportVerdict::accepted || r.verdict == StretchReportVerdict::duplicate ||
+                    r.verdict == StretchReportVerdict::late;
+  if (r.verdict == StretchReportVerdict::wrong_layout && !layout_warned_) {
+    layout_warned_ = true;
+    const StretchStreamStats& s = stream_.stats();
+    logger().error("stretch board: the board measures {} x {} strips but the layout expects {} x {}: a different "
+                   "glove is plugged in, or the layout file is not this glove's; its measurements are refused",
+                   s.top_strips, s.bottom_strips, options_.stream.expected_top_strips,
+                   options_.stream.expected_bottom_strips);
+  }
+  if (data) {
+    last_data_ns_ = receive_ns;
+    if (r.device_reset) {
+      deliver_pending();  // on the old epoch's clock, before it is forgotten
+      clock_sync_.reset();
+    }
+    // Duplicates and late reports are observations too: they arrived later
+    // than their twin would have, so they sit above the envelope and cannot pull it.
+    (void)stats_.observe_clock(clock_sync_, static_cast<std::uint32_t>(r.last_device_time_us), receive_ns);
+  }
+  if (r.verdict == StretchReportVerdict::accepted) {
+    for (std::size_t i = 0; i < r.sample_count && pending_.size() < pending_.capacity(); ++i) {
+      pending_.push_back(samples[i]);
+    }
+  }
+}
+
+void StretchDevice::deliver_pending() {
+  for (StretchSample& s : pending_) {
+    // The unwrapped device time equals the wire's counter modulo 2^32, which is what hid::ClockSync unwraps.
+    TimeNs t = clock_sync_.to_host_ns(static_cast<std::uint32_t>(s.device_time_us));
+    if (delivered_any_ && t <= last_time_ns_) {
+      t = last_time_ns_ + 1000;
+      ++stats_.time_clamps;
+    }
+    delivered_any_ = true;
+    last_time_ns_ = t;
+    s.time_ns = t;
+    if (s.status != StretchMeasurementStatus::ok && !options_.deliver_flagged) {
+      ++stats_.samples_rejected;
+      continue;
+    }
+    if (!outlet_.deliver(s)) {
+      ++stats_.queue_overruns;
+      continue;
+    }
+    ++stats_.samples_delivered;
+  }
+  pending_.clear();
+}
+
+}  // namespace proprio::devices

@@ -1,0 +1,38 @@
+#pragma once
+// The functions that register each command file's commands. Which program
+// registers which is in main.cpp; names and descriptions of the top-level
+// commands are in command_table.cpp.
+namespace CLI {
+class App;
+}
+
+namespace proprio::cli {
+
+// Each registers its subcommand; the callback runs it and sets the exit code.
+void add_sim_hand_command(CLI::App& app, int& exit_code);
+void add_replay_command(CLI::App& app, int& exit_code);
+// `sim-vist`, `track vist` and `bench vist`.
+void add_vist_commands(CLI::App& app, int& exit_code);
+// `calibrate stereo`.
+void add_calibrate_command(CLI::App& app, int& exit_code);
+// `glove emulate|monitor|list`: the USB HID IMU glove.
+void add_glove_command(CLI::App& app, int& exit_code);
+// `sim-glove`: simulated stretch-glove sessions written as a training dataset.
+void add_sim_glove_command(CLI::App& app, int& exit_code);
+// `bench glove` and `calibrate glove`: the stretch glove's pipeline.
+void add_stretch_glove_commands(CLI::App& app, int& exit_code);
+// `stretch-board emulate|monitor|list`: the stretch glove's USB HID read-out board.
+void add_stretch_board_command(CLI::App& app, int& exit_code);
+// `haptics sim|mjcf|devices|test` and `bench haptics`.
+void add_haptics_commands(CLI::App& app, int& exit_code);
+void add_haptics_device_commands(CLI::App& haptics, int& exit_code);
+// `layer install|uninstall|status|init-config` and `xr-probe`: built when the
+// OpenXR layer is part of the build (PROPRIO_HAVE_OPENXR_LAYER).
+void add_layer_commands(CLI::App& app, int& exit_code);
+// `psychometric fit`, `stats ...` and `study ...` (proprio::study).
+void add_study_commands(CLI::App& app, int& exit_code);
+// `run SCENE`: the engine (proprio::engine).
+void add_run_command(CLI::App& app, int& exit_code);
+void add_xr_probe_command(CLI::App& app, int& exit_code);
+
+}  // namespace proprio::cli

@@ -1,0 +1,143 @@
+#include "command_table.hpp"
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+namespace proprio::cli {
+namespace {
+
+constexpr CommandInfo kCommands[] = {
+    {"sim-hand",
+     "Simulate a hand performing a motion protocol and record its ground truth.\n"
+     "Writes streams hand/<hand>/ground_truth (26 joint poses with velocities), "
+     "hand/<hand>/joint_angles_ground_truth, head/ground_truth and events.",
+     Family::core, false},
+    {"replay",
+     "Read a recording: list its streams, check its integrity, summarise the hand motion and play the hand poses "
+     "through the replay HandSource.\nA file cut short by a crash is read up to its last complete record. "
+     "Exit status: 0 readable, 1 cannot open, 3 corrupt data found.",
+     Family::core, false},
+    {"sim-vist",
+     "Simulate a subject wearing the VIST glove in front of a head-mounted stereo camera and record the session\n"
+     "(IMU samples, stereo marker detections, camera poses, ground truth and the live tracker output).",
+     Family::trackers, false},
+    {"track", "Run a tracker on recorded sensor data", Family::trackers, true},
+    {"bench", "Benchmarks that measure accuracy on simulated data", Family::split, true},
+    {"bench vist",
+     "Run the VIST evaluation protocol on simulated subjects and print the accuracy:\n"
+     "free motion (a random target pose every 3 s), challenges (half the markers occluded 2 s,\n"
+     "hand out of view 3 s, distractor blobs, 10% dropped frames, IMU board unplugged 1 s) and ablations (IMU only,\n"
+     "vision only, correspondence search without IMU priors).",
+     Family::trackers, false},
+    {"bench glove",
+     "Run the stretch glove's pipeline (read-out, min-max calibration, ONNX pose model, hand) on held-out\n"
+     "simulated subjects and print the joint-angle error with each session's own min-max calibration (the thesis's\n"
+     "scenario 4) and, with --global-model, with the training data's min-max (scenario 3).\n"
+     "Simulated accuracy is not real-world accuracy.",
+     Family::trackers, false},
+    {"bench haptics",
+     "Time the MuJoCo step (hand + peg-in-hole, pressing) and the 1 kHz servo loop on its own thread:\n"
+     "tick duration, wake-up jitter and overruns. Timings depend on the machine and its load.",
+     Family::haptics, false},
+    {"calibrate",
+     "Calibrate sensors: 'calibrate stereo' for VIST's camera, 'calibrate glove' for the stretch glove",
+     Family::trackers, true},
+    {"record", "Record training data", Family::trackers, true},
+    {"glove",
+     "The USB HID IMU glove (7 IMUs at 100 Hz; protocol in docs/glove-hid-protocol.md): list devices, monitor a "
+     "glove or a capture file, or emulate one.",
+     Family::devices, true},
+    {"sim-glove",
+     "Simulate stretch-glove sessions and write a training dataset (cells.npy, angles.npy, session.npy, "
+     "subject.npy, phase.npy, calib_min.npy, calib_max.npy, meta.json).\n"
+     "Each session is a new donning: an exploration phase for the min-max calibration, then free motion.",
+     Family::trackers, false},
+    {"stretch-board",
+     "The stretch glove's USB HID read-out board (13 x 14 strips, 960 measurements/s; protocol in "
+     "docs/stretch-glove-hid-protocol.md): list devices, monitor a board or a capture file, or run an emulated board "
+     "as a self-test.",
+     Family::devices, true},
+    {"haptics", "Contact simulation and fingertip haptic devices", Family::haptics, true},
+#ifdef PROPRIO_HAVE_STUDY
+    {"psychometric", "Psychometric functions (docs/study.md)", Family::core, true},
+    {"stats", "Statistics on wide CSVs (one row per subject, one column per condition)", Family::core, true},
+    {"study", "Study designs and whole-study analysis (docs/study.md)", Family::core, true},
+#endif
+#ifdef PROPRIO_HAVE_ENGINE
+    {"run",
+     "Run a scene with the engine: tracked hands, the haptics servo loop and the renderer. Output goes to an HMD "
+     "through OpenXR when a runtime with XR_KHR_vulkan_enable2 is present, else to a window, else headless to PNG "
+     "frames (force one with --xr, --window or --headless). Headless runs step simulated time, so they are "
+     "reproducible.",
+     Family::engine, false},
+#endif
+#ifdef PROPRIO_HAVE_OPENXR_LAYER
+    {"layer",
+     "Install, check and configure Proprio's OpenXR API layer (XR_APILAYER_PROPRIO_hand_tracking), which gives any "
+     "OpenXR app XR_EXT_hand_tracking joints from Proprio's hand sources. See docs/openxr-layer.md.",
+     Family::core, true},
+    {"xr-probe",
+     "Be a minimal OpenXR app: through the system's OpenXR loader, open a session on the active runtime, create "
+     "hand trackers (XR_EXT_hand_tracking) and print once a second what they report: whether each hand is active, "
+     "wrist and index-tip positions (mm), palm orientation, the share of joints with all location flags, how often "
+     "joints were located and how often the data actually changed.\n"
+     "The session is headless (XR_MND_headless) when the runtime offers it. When a headless session cannot run "
+     "frames (Monado refuses xrBeginFrame there), or the runtime has no headless mode, the probe uses a Vulkan "
+     "graphics binding (XR_KHR_vulkan_enable2) instead, and says which it used.\n"
+     "Enabled API layers (Proprio's included, see 'proprio layer status') apply as for any app. Ctrl-C ends it "
+     "cleanly.\n"
+     "Exit status: 0 a hand was active and no call failed; 1 an error, including any failed OpenXR call (reported "
+     "with its XrResult); "
+     "2 XR_EXT_hand_tracking not offered, or supportsHandTracking false; 3 the run completed without a failed "
+     "call but no hand was ever active.",
+     Family::engine, false},
+#endif
+};
+
+}  // namespace
+
+std::span<const CommandInfo> command_table() { return kCommands; }
+
+const CommandInfo* find_command(std::string_view path) {
+  for (const CommandInfo& c : kCommands) {
+    if (c.path == path) return &c;
+  }
+  return nullptr;
+}
+
+std::string_view family_program(Family family) {
+  switch (family) {
+    case Family::core:
+    case Family::split:
+      return "proprio";
+    case Family::trackers:
+      return "proprio-trackers";
+    case Family::devices:
+      return "proprio-devices";
+    case Family::haptics:
+      return "proprio-haptics";
+    case Family::engine:
+      return "proprio-engine";
+  }
+  return "proprio";
+}
+
+CLI::App* add_command(CLI::App& app, std::string_view path) {
+  CLI::App* parent = &app;
+  std::string_view name = path;
+  if (const auto space = path.find(' '); space != std::string_view::npos) {
+    parent = add_command(app, path.substr(0, space));
+    name = path.substr(space + 1);
+  }
+  for (CLI::App* sub : parent->get_subcommands({})) {
+    if (sub->get_name() == name) return sub;
+  }
+  const CommandInfo* info = find_command(path);
+  // A path missing from the table is a programming error: register it anyway,
+  // so --help shows the gap instead of the command vanishing.
+  CLI::App* sub = parent->add_subcommand(std::string(name), info ? std::string(info->description) : std::string());
+  if (info != nullptr && info->group) sub->require_subcommand(1);
+  return sub;
+}
+
+}  // namespace proprio::cli

@@ -4,9 +4,9 @@
 if(PROPRIO_BUILD_TESTS)
   proprio_add_test(fingertip_device_tests
     SOURCES
-      unit/test_fingertip_protocol.cpp
-      unit/test_fingertip_emulator.cpp
-      unit/test_fingertip_device.cpp
+      unit/haptics/fingertip_device/test_fingertip_protocol.cpp
+      unit/haptics/fingertip_device/test_fingertip_emulator.cpp
+      unit/haptics/fingertip_device/test_fingertip_device.cpp
     DEPS proprio::fingertip_device)
 endif()
 list(APPEND PROPRIO_FUZZ_TARGETS fingertip_protocol)

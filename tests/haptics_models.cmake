@@ -2,8 +2,8 @@
 if(PROPRIO_BUILD_TESTS)
   proprio_add_test(haptics_model_tests
     SOURCES
-      unit/test_device_models.cpp
-      unit/test_haptic_safety.cpp
+      unit/haptics/test_device_models.cpp
+      unit/haptics/test_haptic_safety.cpp
     DEPS proprio::haptics)
   target_compile_definitions(haptics_model_tests PRIVATE PROPRIO_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
 endif()

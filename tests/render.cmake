@@ -2,7 +2,7 @@
 # on lavapipe (label render: golden images, overlay, allocation; main suite only).
 if(PROPRIO_BUILD_TESTS AND TARGET proprio::render)
   proprio_add_test(render_geometry_tests
-    SOURCES unit/test_render_geometry.cpp
+    SOURCES unit/render/test_render_geometry.cpp
     DEPS proprio::render)
 
   proprio_add_test(render_tests
@@ -20,7 +20,7 @@ endif()
 
 if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine)
   proprio_add_test(engine_scene_tests
-    SOURCES unit/test_engine_scene.cpp unit/test_recentred_hands.cpp
+    SOURCES unit/runtime/engine/test_engine_scene.cpp unit/runtime/engine/test_recentred_hands.cpp
     DEPS proprio::engine)
 
   proprio_add_test(engine_tests

@@ -3,14 +3,14 @@
 if(PROPRIO_BUILD_TESTS AND TARGET proprio::study)
   proprio_add_test(study_tests
     SOURCES
-      unit/test_study_psychometric.cpp
-      unit/test_study_bootstrap.cpp
-      unit/test_study_statistics.cpp
-      unit/test_study_csv_plot.cpp
-      unit/test_study_design.cpp
-      unit/test_study_procedure.cpp
-      unit/test_study_session.cpp
-      unit/test_study_analysis.cpp
+      unit/runtime/study/test_study_psychometric.cpp
+      unit/runtime/study/test_study_bootstrap.cpp
+      unit/runtime/study/test_study_statistics.cpp
+      unit/runtime/study/test_study_csv_plot.cpp
+      unit/runtime/study/test_study_design.cpp
+      unit/runtime/study/test_study_procedure.cpp
+      unit/runtime/study/test_study_session.cpp
+      unit/runtime/study/test_study_analysis.cpp
     DEPS proprio::study nlohmann_json::nlohmann_json)
   # The shipped example designs are read from the source tree.
   target_compile_definitions(study_tests PRIVATE PROPRIO_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
@@ -20,7 +20,7 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::study)
   proprio_add_test(study_accuracy_tests
     LABEL study
     SOURCES
-      unit/test_study_coverage.cpp
+      unit/runtime/study/test_study_coverage.cpp
     DEPS proprio::study)
 endif()
 

@@ -4,7 +4,7 @@
 // report decoders, the sequence-keeping streams of both ends, and the
 // emulated firmware's command handling. Seeds: corpus/fingertip_protocol/
 // (regenerate with PROPRIO_REGEN_CORPUS=1, see
-// tests/unit/test_fingertip_emulator.cpp). Every report is 64 bytes; a short
+// tests/unit/haptics/fingertip_device/test_fingertip_emulator.cpp). Every report is 64 bytes; a short
 // last frame keeps its bytes as they are.
 #include <cmath>
 #include <limits>

@@ -3,7 +3,7 @@
 // the input as a report stream, and again with CRCs recomputed): the report
 // decoders, the stream decoder and the clock alignment behind it. Seeds:
 // corpus/glove_protocol/ (regenerate with PROPRIO_REGEN_CORPUS=1, see
-// tests/unit/test_glove_emulator.cpp). Frames take the size their report ID
+// tests/unit/input/imu_glove_board/test_glove_emulator.cpp). Frames take the size their report ID
 // gives; unknown IDs take 64 bytes, so that every byte is consumed.
 #include "proprio/imu_glove_board/imu_glove_protocol.hpp"
 #include "proprio/imu_glove_board/imu_glove_stream.hpp"

@@ -3,7 +3,7 @@
 // the summary must account for every byte. Each input is also read with its
 // CRCs repaired, and once more with its middle damaged, so the payload decoders
 // and the resynchronisation after damage both see every input. Seeds: corpus/recording_reader/
-// (regenerate with PROPRIO_REGEN_CORPUS=1, see tests/unit/test_recording.cpp).
+// (regenerate with PROPRIO_REGEN_CORPUS=1, see tests/unit/runtime/core/test_recording.cpp).
 #include <algorithm>
 #include <cstdlib>
 #include <vector>

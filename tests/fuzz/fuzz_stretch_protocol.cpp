@@ -4,7 +4,7 @@
 // decoders, the emulator's command handler, the stream decoder (also with an
 // expected layout) and the clock alignment behind it. Seeds:
 // corpus/stretch_protocol/ (regenerate with PROPRIO_REGEN_CORPUS=1, see
-// tests/unit/test_stretch_emulator.cpp). Frames take the size their report ID
+// tests/unit/input/stretch_board/test_stretch_emulator.cpp). Frames take the size their report ID
 // gives; unknown IDs take 64 bytes, so that every byte is consumed.
 #include <vector>
 

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "hid_monitor_common.hpp"
 #include "proprio/core/file_io.hpp"
 #include "progress.hpp"
 #include "proprio/glove_descriptions/imu_glove_description.hpp"
@@ -42,51 +43,13 @@ namespace {
 using namespace proprio::devices;
 
 
-// ---------------------------------------------------------------------------
-// list
-
-struct ListArgs {
-  bool all = false;
-  std::string vid = hex4(kImuGloveUsbVendorId);
-  std::string pid = hex4(kImuGloveUsbProductId);
-};
-
-int run_list(const ListArgs& a) {
-  const std::uint16_t vid = a.all ? 0 : parse_hex_id(a.vid);
-  const std::uint16_t pid = a.all ? 0 : parse_hex_id(a.pid);
-  auto devices = hid::enumerate_hid_devices(vid, pid);
-  if (!devices) return logger().error("{}", devices.error().message), 1;
-  if (devices->empty()) {
-    if (a.all) {
-      std::printf("no HID devices found (hidapi %s)\n", hid::hidapi_version().c_str());
-    } else {
-      std::printf("no glove found with VID:PID %s:%s; 'proprio glove list --all' lists every HID device\n",
-                  hex4(vid).c_str(), hex4(pid).c_str());
-    }
-    return 0;
-  }
-  std::printf("%-20s %-9s %-8s %-4s %-16s %s\n", "path", "vid:pid", "usage", "intf", "serial", "manufacturer / product");
-  for (const hid::HidDeviceInfo& d : *devices) {
-    const bool glove = d.vendor_id == kImuGloveUsbVendorId && d.product_id == kImuGloveUsbProductId &&
-                       (d.usage_page == 0 || d.usage_page == kImuGloveHidUsagePage);
-    std::printf("%-20s %s:%s %04x:%02x %-4d %-16s %s / %s%s\n", d.path.c_str(), hex4(d.vendor_id).c_str(),
-                hex4(d.product_id).c_str(), d.usage_page, d.usage, d.interface_number,
-                d.serial.empty() ? "-" : d.serial.c_str(), d.manufacturer.c_str(), d.product.c_str(),
-                glove ? "  [glove]" : "");
-  }
-  return 0;
-}
+constexpr HidBoardKind kGloveKind{"glove", "glove", kImuGloveUsbVendorId, kImuGloveUsbProductId, kImuGloveHidUsagePage};
 
 // ---------------------------------------------------------------------------
 // monitor
 
-struct MonitorArgs {
-  std::string vid = hex4(kImuGloveUsbVendorId);
-  std::string pid = hex4(kImuGloveUsbProductId);
-  std::string serial;
-  std::string path;
-  double seconds = 0.0;
-  double interval_s = 1.0;
+struct MonitorArgs : HidMonitorArgs {
+  MonitorArgs() : HidMonitorArgs(kGloveKind) {}
   double rate_hz = 100.0;
   std::string from_file;
 };
@@ -402,14 +365,9 @@ int run_emulate(const EmulateArgs& a) {
 void add_glove_command(CLI::App& app, int& exit_code) {
   CLI::App* glove = add_command(app, "glove");
   glove->require_subcommand(1);
-  const auto hex = [](const std::string& s) { return check_hex_id(s); };
 
-  auto list = std::make_shared<ListArgs>();
-  CLI::App* list_cmd = glove->add_subcommand("list", "List HID devices with the glove's USB IDs (or all with --all).");
-  list_cmd->add_flag("--all", list->all, "List every HID device, not just gloves");
-  list_cmd->add_option("--vid", list->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
-  list_cmd->add_option("--pid", list->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
-  list_cmd->callback([list, &exit_code] { exit_code = run_list(*list); });
+  add_hid_list_command(*glove, kGloveKind, "List HID devices with the glove's USB IDs (or all with --all).",
+                       "List every HID device, not just gloves", exit_code);
 
   auto mon = std::make_shared<MonitorArgs>();
   CLI::App* mon_cmd = glove->add_subcommand(
@@ -418,16 +376,7 @@ void add_glove_command(CLI::App& app, int& exit_code) {
       "late and undecodable reports, rejected samples, restarts and the clock alignment; at the end, per-IMU "
       "statistics. Keeps going through unplugging and replugging. With --from-file, decodes a capture written by "
       "'glove emulate' instead (rates are then per second of device time). Exit status 1 if no IMU data arrived.");
-  mon_cmd->add_option("--vid", mon->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
-  mon_cmd->add_option("--pid", mon->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
-  mon_cmd->add_option("--serial", mon->serial, "Open the glove with this USB serial number (e.g. left vs right)");
-  mon_cmd->add_option("--path", mon->path, "Open this HID device node (e.g. /dev/hidraw3) instead of searching");
-  mon_cmd->add_option("--seconds", mon->seconds, "Stop after this long, s (0: until Ctrl-C)")
-      ->check(CLI::Range(0.0, 7.0 * 24 * 3600))
-      ->capture_default_str();
-  mon_cmd->add_option("--interval", mon->interval_s, "Seconds between status lines")
-      ->check(CLI::Range(0.1, 3600.0))
-      ->capture_default_str();
+  add_hid_monitor_options(*mon_cmd, *mon, "Open the glove with this USB serial number (e.g. left vs right)");
   mon_cmd->add_option("--rate", mon->rate_hz, "Tick rate to assume until the glove's own is measured, Hz")
       ->check(CLI::Range(1.0, static_cast<double>(kImuGloveMaxRateHz)))
       ->capture_default_str();

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "hid_monitor_common.hpp"
 #include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
 #include "proprio/hid/capture_file.hpp"
@@ -47,41 +48,8 @@ double percent(std::uint64_t part, std::uint64_t whole) {
   return whole == 0 ? 0.0 : 100.0 * static_cast<double>(part) / static_cast<double>(whole);
 }
 
-// ---------------------------------------------------------------------------
-// list
-
-struct ListArgs {
-  bool all = false;
-  std::string vid = hex4(kStretchUsbVendorId);
-  std::string pid = hex4(kStretchUsbProductId);
-};
-
-int run_list(const ListArgs& a) {
-  const std::uint16_t vid = a.all ? 0 : parse_hex_id(a.vid);
-  const std::uint16_t pid = a.all ? 0 : parse_hex_id(a.pid);
-  auto devices = hid::enumerate_hid_devices(vid, pid);
-  if (!devices) return logger().error("{}", devices.error().message), 1;
-  if (devices->empty()) {
-    if (a.all) {
-      std::printf("no HID devices found (hidapi %s)\n", hid::hidapi_version().c_str());
-    } else {
-      std::printf("no stretch board found with VID:PID %s:%s; 'proprio stretch-board list --all' lists every HID "
-                  "device\n",
-                  hex4(vid).c_str(), hex4(pid).c_str());
-    }
-    return 0;
-  }
-  std::printf("%-20s %-9s %-8s %-4s %-16s %s\n", "path", "vid:pid", "usage", "intf", "serial", "manufacturer / product");
-  for (const hid::HidDeviceInfo& d : *devices) {
-    const bool board = d.vendor_id == kStretchUsbVendorId && d.product_id == kStretchUsbProductId &&
-                       (d.usage_page == 0 || d.usage_page == kStretchHidUsagePage);
-    std::printf("%-20s %s:%s %04x:%02x %-4d %-16s %s / %s%s\n", d.path.c_str(), hex4(d.vendor_id).c_str(),
-                hex4(d.product_id).c_str(), d.usage_page, d.usage, d.interface_number,
-                d.serial.empty() ? "-" : d.serial.c_str(), d.manufacturer.c_str(), d.product.c_str(),
-                board ? "  [stretch board]" : "");
-  }
-  return 0;
-}
+constexpr HidBoardKind kStretchBoardKind{"stretch board", "stretch-board", kStretchUsbVendorId, kStretchUsbProductId,
+                                         kStretchHidUsagePage};
 
 // ---------------------------------------------------------------------------
 // What the host saw, for all three ways of looking at a stream.
@@ -179,13 +147,8 @@ void print_summary(const StretchStreamStats& s, double span_s) {
 // ---------------------------------------------------------------------------
 // monitor
 
-struct MonitorArgs {
-  std::string vid = hex4(kStretchUsbVendorId);
-  std::string pid = hex4(kStretchUsbProductId);
-  std::string serial;
-  std::string path;
-  double seconds = 0.0;
-  double interval_s = 1.0;
+struct MonitorArgs : HidMonitorArgs {
+  MonitorArgs() : HidMonitorArgs(kStretchBoardKind) {}
   double rate_hz = kStretchDefaultRateHz;
   int top_strips = 0;
   int bottom_strips = 0;
@@ -573,14 +536,9 @@ int run_emulate(const EmulateArgs& a) {
 void add_stretch_board_command(CLI::App& app, int& exit_code) {
   CLI::App* board = add_command(app, "stretch-board");
   board->require_subcommand(1);
-  const auto hex = [](const std::string& s) { return check_hex_id(s); };
 
-  auto list = std::make_shared<ListArgs>();
-  CLI::App* list_cmd = board->add_subcommand("list", "List HID devices with the board's USB IDs (or all with --all).");
-  list_cmd->add_flag("--all", list->all, "List every HID device, not just stretch boards");
-  list_cmd->add_option("--vid", list->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
-  list_cmd->add_option("--pid", list->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
-  list_cmd->callback([list, &exit_code] { exit_code = run_list(*list); });
+  add_hid_list_command(*board, kStretchBoardKind, "List HID devices with the board's USB IDs (or all with --all).",
+                       "List every HID device, not just stretch boards", exit_code);
 
   auto mon = std::make_shared<MonitorArgs>();
   CLI::App* mon_cmd = board->add_subcommand(
@@ -590,16 +548,7 @@ void add_stretch_board_command(CLI::App& app, int& exit_code) {
       "latest values; at the end, totals and the latest capacitance of every combination. Keeps going through "
       "unplugging and replugging. With --from-file, decodes a capture instead (rates are then per second of device "
       "time). Exit status 1 if no measurements arrived.");
-  mon_cmd->add_option("--vid", mon->vid, "USB vendor ID, hexadecimal")->check(hex)->capture_default_str();
-  mon_cmd->add_option("--pid", mon->pid, "USB product ID, hexadecimal")->check(hex)->capture_default_str();
-  mon_cmd->add_option("--serial", mon->serial, "Open the board with this USB serial number");
-  mon_cmd->add_option("--path", mon->path, "Open this HID device node (e.g. /dev/hidraw3) instead of searching");
-  mon_cmd->add_option("--seconds", mon->seconds, "Stop after this long, s (0: until Ctrl-C)")
-      ->check(CLI::Range(0.0, 7.0 * 24 * 3600))
-      ->capture_default_str();
-  mon_cmd->add_option("--interval", mon->interval_s, "Seconds between status lines")
-      ->check(CLI::Range(0.1, 3600.0))
-      ->capture_default_str();
+  add_hid_monitor_options(*mon_cmd, *mon, "Open the board with this USB serial number");
   mon_cmd->add_option("--rate", mon->rate_hz, "Measurement rate to assume until the board's own is measured, per s")
       ->check(CLI::Range(1.0, static_cast<double>(kStretchMaxRateHz)))
       ->capture_default_str();

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "proprio/core/log.hpp"
+#include "proprio/hid/info_report.hpp"
 
 namespace proprio::devices {
 
@@ -64,24 +65,16 @@ Result<std::string> ImuGloveDevice::on_open(hid::HidTransport& transport) {
   last_data_ns_ = clock_.now_ns();
   std::string detail = transport.describe();
   if (options_.query_info) {
-    std::array<std::uint8_t, kImuGloveInfoReportSize> buf{};
-    auto n = transport.get_feature(static_cast<std::uint8_t>(ImuGloveReportId::device_info), buf);
-    if (n) {
-      auto info = decode_info_report(std::span<const std::uint8_t>(buf).first(std::min(*n, buf.size())));
-      if (info) {
-        stats_.have_info = true;
-        stats_.info = *info;
-        char text[160];
-        std::snprintf(text, sizeof text, ": firmware %u.%u.%u, %u IMUs at %u Hz, %s, %s%s", info->firmware[0],
-                      info->firmware[1], info->firmware[2], info->imu_count, info->rate_hz,
-                      to_string(info->accel_range), to_string(info->gyro_range),
-                      info->streaming ? "" : ", not streaming");
-        detail += text;
-      } else {
-        logger().warn("glove: device info report unreadable: {}", info.error().message);
-      }
-    } else {
-      logger().debug("glove: no device info report: {}", n.error().message);
+    const auto info = hid::query_info_report<kImuGloveInfoReportSize>(
+        transport, static_cast<std::uint8_t>(ImuGloveReportId::device_info), decode_info_report, "glove");
+    if (info) {
+      stats_.have_info = true;
+      stats_.info = *info;
+      char text[160];
+      std::snprintf(text, sizeof text, ": firmware %u.%u.%u, %u IMUs at %u Hz, %s, %s%s", info->firmware[0],
+                    info->firmware[1], info->firmware[2], info->imu_count, info->rate_hz,
+                    to_string(info->accel_range), to_string(info->gyro_range), info->streaming ? "" : ", not streaming");
+      detail += text;
     }
   }
   return detail;

@@ -7,17 +7,10 @@ namespace proprio::devices {
 
 namespace {
 
-// Sub-stream numbers under the emulator's seed (mix_seed), one per random effect.
-enum Stream : std::uint64_t { kDropStream = 1, kDuplicateStream, kCorruptStream, kReorderStream, kStaleStream };
+// Sub-stream numbers under the emulator's seed (mix_seed) for the glove's own random effects.
+enum Stream : std::uint64_t { kStaleStream = hid::kFirstDeviceFaultStream };
 
-Status check_probability(double p, const char* name) {
-  if (!(p >= 0.0 && p <= 1.0)) {
-    return make_error(Errc::invalid_argument,
-                      std::string("glove emulator: faults.") + name + " = " + std::to_string(p) +
-                          " is not a probability; use a value from 0 to 1");
-  }
-  return {};
-}
+constexpr const char* kWho = "glove emulator";
 
 }  // namespace
 
@@ -32,16 +25,9 @@ Status ImuGloveEmulatorFaults::validate() const {
                                 {corrupt_probability, "corrupt_probability"},
                                 {reorder_probability, "reorder_probability"},
                                 {stale_probability, "stale_probability"}}) {
-    if (auto s = check_probability(p, name); !s) return s;
+    if (auto s = hid::check_fault_probability(kWho, name, p); !s) return s;
   }
-  for (std::size_t i = 0; i < unplugs.size(); ++i) {
-    if (unplugs[i].duration_ns <= 0) {
-      return make_error(Errc::invalid_argument, "glove emulator: faults.unplugs[" + std::to_string(i) +
-                                                    "] has duration " + std::to_string(unplugs[i].duration_ns) +
-                                                    " ns; an outage must last longer than 0");
-    }
-  }
-  return {};
+  return hid::check_fault_outages(kWho, unplugs);
 }
 
 Status ImuGloveEmulatorOptions::validate() const {
@@ -71,10 +57,7 @@ Result<ImuGloveEmulator> ImuGloveEmulator::create(ImuGloveEmulatorOptions option
 
 ImuGloveEmulator::ImuGloveEmulator(ImuGloveEmulatorOptions options)
     : options_(std::move(options)),
-      drop_rng_(mix_seed(options_.seed, kDropStream)),
-      duplicate_rng_(mix_seed(options_.seed, kDuplicateStream)),
-      corrupt_rng_(mix_seed(options_.seed, kCorruptStream)),
-      reorder_rng_(mix_seed(options_.seed, kReorderStream)),
+      link_faults_(options_.seed),
       stale_rng_(mix_seed(options_.seed, kStaleStream)),
       rate_hz_(options_.rate_hz),
       accel_range_(options_.accel_range),
@@ -106,12 +89,8 @@ TimeNs boot_before(const ImuGloveEmulatorOptions& o, TimeNs t_ns) noexcept {
 }  // namespace
 
 std::uint32_t ImuGloveEmulator::device_timestamp_us(TimeNs t_ns) const noexcept {
-  const TimeNs boot = boot_before(options_, t_ns);
-  if (t_ns <= boot) return options_.boot_timestamp_us;
-  // The counter ticks every device µs; truncate as a hardware counter does.
-  const double device_us = static_cast<double>(t_ns - boot) * (1.0 + options_.clock_error_ppm * 1e-6) * 1e-3;
-  const auto ticks = static_cast<std::uint64_t>(std::floor(device_us));
-  return static_cast<std::uint32_t>(options_.boot_timestamp_us + ticks);  // wraps at 2^32 like the register
+  return hid::emulated_counter_us(boot_before(options_, t_ns), t_ns, options_.boot_timestamp_us,
+                                  options_.clock_error_ppm);
 }
 
 void ImuGloveEmulator::boot(TimeNs t_ns) noexcept {
@@ -149,14 +128,14 @@ Status ImuGloveEmulator::tick(TimeNs t_ns, std::span<const ImuSample> samples, s
     return {};
   }
   if (!powered_at(t_ns)) {
-    if (powered_) held_.reset();  // whatever sat in the transmit buffer dies with the power
+    if (powered_) link_faults_.discard_held();  // whatever sat in the transmit buffer dies with the power
     powered_ = false;
     ++stats_.ticks_unpowered;
     return {};
   }
   const TimeNs boot_ns = boot_before(options_, t_ns);
   if (!powered_ || boot_ns != last_boot_ns_) {
-    held_.reset();
+    link_faults_.discard_held();
     boot(boot_ns);
   }
   if (!streaming_) return {};
@@ -223,49 +202,10 @@ Status ImuGloveEmulator::tick(TimeNs t_ns, std::span<const ImuSample> samples, s
 }
 
 void ImuGloveEmulator::send(const ImuGloveEmulatedReport& report, std::vector<ImuGloveEmulatedReport>& out) {
-  const ImuGloveEmulatorFaults& f = options_.faults;
-  // One draw per report from each stream, whatever the outcome.
-  const bool drop = drop_rng_.uniform01() < f.drop_probability;
-  const bool duplicate = duplicate_rng_.uniform01() < f.duplicate_probability;
-  const bool corrupt = corrupt_rng_.uniform01() < f.corrupt_probability;
-  const bool reorder = reorder_rng_.uniform01() < f.reorder_probability;
-  const std::uint64_t corrupt_byte = corrupt_rng_.below(kImuGloveDataReportSize);
-  const std::uint64_t corrupt_bit = corrupt_rng_.below(8);
-  if (drop) {
-    ++stats_.dropped;
-    return;
-  }
-  ImuGloveEmulatedReport r = report;
-  if (corrupt) {
-    r.bytes[corrupt_byte] ^= static_cast<std::uint8_t>(1u << corrupt_bit);
-    ++stats_.corrupted;
-  }
-  if (reorder && !held_) {
-    held_ = r;
-    ++stats_.reordered;
-    return;
-  }
-  out.push_back(r);
-  ++stats_.reports_sent;
-  if (duplicate) {
-    out.push_back(r);
-    ++stats_.reports_sent;
-    ++stats_.duplicated;
-  }
-  if (held_) {
-    held_->send_ns = r.send_ns;
-    out.push_back(*held_);
-    ++stats_.reports_sent;
-    held_.reset();
-  }
+  link_faults_.send(report, options_.faults, stats_, out);
 }
 
-void ImuGloveEmulator::flush(std::vector<ImuGloveEmulatedReport>& out) {
-  if (!held_) return;
-  out.push_back(*held_);
-  ++stats_.reports_sent;
-  held_.reset();
-}
+void ImuGloveEmulator::flush(std::vector<ImuGloveEmulatedReport>& out) { link_faults_.flush(stats_, out); }
 
 ImuGloveCommandResult ImuGloveEmulator::handle_command(std::span<const std::uint8_t> bytes) {
   ImuGloveCommand c;

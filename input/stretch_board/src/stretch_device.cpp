@@ -6,6 +6,7 @@
 #include <string>
 
 #include "proprio/core/log.hpp"
+#include "proprio/hid/info_report.hpp"
 
 namespace proprio::devices {
 
@@ -77,31 +78,24 @@ Result<std::string> StretchDevice::on_open(hid::HidTransport& transport) {
   last_data_ns_ = clock_.now_ns();
   std::string detail = transport.describe();
   if (options_.query_info) {
-    std::array<std::uint8_t, kStretchInfoReportSize> buf{};
-    auto n = transport.get_feature(static_cast<std::uint8_t>(StretchReportId::device_info), buf);
-    if (n) {
-      auto info = decode_stretch_info_report(std::span<const std::uint8_t>(buf).first(std::min(*n, buf.size())));
-      if (info) {
-        stats_.have_info = true;
-        stats_.info = *info;
-        char text[200];
-        std::snprintf(text, sizeof text, ": firmware %u.%u.%u, %u x %u strips (%zu combinations) at %u/s, full scale %.1f pF%s",
-                      info->firmware[0], info->firmware[1], info->firmware[2], info->top_strips, info->bottom_strips,
-                      info->combination_count(), info->rate_hz, stretch_count_to_pf(info->full_scale_ff),
-                      info->streaming ? "" : ", not streaming");
+    const auto info = hid::query_info_report<kStretchInfoReportSize>(
+        transport, static_cast<std::uint8_t>(StretchReportId::device_info), decode_stretch_info_report, "stretch board");
+    if (info) {
+      stats_.have_info = true;
+      stats_.info = *info;
+      char text[200];
+      std::snprintf(text, sizeof text, ": firmware %u.%u.%u, %u x %u strips (%zu combinations) at %u/s, full scale %.1f pF%s",
+                    info->firmware[0], info->firmware[1], info->firmware[2], info->top_strips, info->bottom_strips,
+                    info->combination_count(), info->rate_hz, stretch_count_to_pf(info->full_scale_ff),
+                    info->streaming ? "" : ", not streaming");
+      detail += text;
+      const StretchStreamOptions& so = options_.stream;
+      if ((so.expected_top_strips && info->top_strips != so.expected_top_strips) ||
+          (so.expected_bottom_strips && info->bottom_strips != so.expected_bottom_strips)) {
+        std::snprintf(text, sizeof text, "; WRONG LAYOUT: the layout expects %u x %u strips, so its "
+                      "measurements will be refused", so.expected_top_strips, so.expected_bottom_strips);
         detail += text;
-        const StretchStreamOptions& so = options_.stream;
-        if ((so.expected_top_strips && info->top_strips != so.expected_top_strips) ||
-            (so.expected_bottom_strips && info->bottom_strips != so.expected_bottom_strips)) {
-          std::snprintf(text, sizeof text, "; WRONG LAYOUT: the layout expects %u x %u strips, so its "
-                        "measurements will be refused", so.expected_top_strips, so.expected_bottom_strips);
-          detail += text;
-        }
-      } else {
-        logger().warn("stretch board: device info report unreadable: {}", info.error().message);
       }
-    } else {
-      logger().debug("stretch board: no device info report: {}", n.error().message);
     }
   }
   return detail;

@@ -10,25 +10,12 @@ namespace proprio::devices {
 
 namespace {
 
-// Sub-stream numbers under the emulator's seed (mix_seed), one per random effect.
-enum Stream : std::uint64_t {
-  kDropStream = 1,
-  kDuplicateStream,
-  kCorruptStream,
-  kReorderStream,
-  kOverrunStream,
-  kSaturateStream
-};
+// Sub-stream numbers under the emulator's seed (mix_seed) for the board's own random effects.
+enum Stream : std::uint64_t { kOverrunStream = hid::kFirstDeviceFaultStream, kSaturateStream };
 
 constexpr TimeNs kNever = std::numeric_limits<TimeNs>::max();
 
-Status check_probability(double p, const char* name) {
-  if (!(p >= 0.0 && p <= 1.0)) {
-    return make_error(Errc::invalid_argument, std::string("stretch board emulator: faults.") + name + " = " +
-                                                  std::to_string(p) + " is not a probability; use a value from 0 to 1");
-  }
-  return {};
-}
+constexpr const char* kWho = "stretch board emulator";
 
 Status bad_option(const std::string& what) {
   return make_error(Errc::invalid_argument, "stretch board emulator: " + what);
@@ -74,15 +61,9 @@ Status StretchEmulatorFaults::validate() const {
                                 {reorder_probability, "reorder_probability"},
                                 {device_overrun_probability, "device_overrun_probability"},
                                 {saturate_probability, "saturate_probability"}}) {
-    if (auto s = check_probability(p, name); !s) return s;
+    if (auto s = hid::check_fault_probability(kWho, name, p); !s) return s;
   }
-  for (std::size_t i = 0; i < unplugs.size(); ++i) {
-    if (unplugs[i].duration_ns <= 0) {
-      return bad_option("faults.unplugs[" + std::to_string(i) + "] has duration " +
-                        std::to_string(unplugs[i].duration_ns) + " ns; an outage must last longer than 0");
-    }
-  }
-  return {};
+  return hid::check_fault_outages(kWho, unplugs);
 }
 
 Status StretchEmulatorOptions::validate() const {
@@ -125,10 +106,7 @@ Result<StretchEmulator> StretchEmulator::create(StretchEmulatorOptions options, 
 StretchEmulator::StretchEmulator(StretchEmulatorOptions options, StretchCapacitanceProvider provider)
     : options_(std::move(options)),
       provider_(std::move(provider)),
-      drop_rng_(mix_seed(options_.seed, kDropStream)),
-      duplicate_rng_(mix_seed(options_.seed, kDuplicateStream)),
-      corrupt_rng_(mix_seed(options_.seed, kCorruptStream)),
-      reorder_rng_(mix_seed(options_.seed, kReorderStream)),
+      link_faults_(options_.seed),
       overrun_rng_(mix_seed(options_.seed, kOverrunStream)),
       saturate_rng_(mix_seed(options_.seed, kSaturateStream)),
       full_scale_ff_(std::clamp<std::uint32_t>(to_ff(options_.full_scale_pf), 1, kStretchMaxCapacitanceCount)),
@@ -143,12 +121,8 @@ StretchEmulator::StretchEmulator(StretchEmulatorOptions options, StretchCapacita
 bool StretchEmulator::powered_at(TimeNs t_ns) const noexcept { return powered(options_, t_ns); }
 
 std::uint32_t StretchEmulator::device_timestamp_us(TimeNs t_ns) const noexcept {
-  const TimeNs boot = boot_before(options_, t_ns);
-  if (t_ns <= boot) return options_.boot_timestamp_us;
-  // The counter ticks every device µs; truncate as a hardware counter does.
-  const double device_us = static_cast<double>(t_ns - boot) * (1.0 + options_.clock_error_ppm * 1e-6) * 1e-3;
-  const auto ticks = static_cast<std::uint64_t>(std::floor(device_us));
-  return static_cast<std::uint32_t>(options_.boot_timestamp_us + ticks);  // wraps at 2^32 like the register
+  return hid::emulated_counter_us(boot_before(options_, t_ns), t_ns, options_.boot_timestamp_us,
+                                  options_.clock_error_ppm);
 }
 
 TimeNs StretchEmulator::measurement_time_ns(std::uint64_t sequence) const noexcept {
@@ -164,7 +138,7 @@ void StretchEmulator::boot(TimeNs t_ns) noexcept {
   rate_hz_ = options_.rate_hz;
   last_token_ = 0;
   last_result_ = StretchCommandResult::none;
-  held_.reset();
+  link_faults_.discard_held();
   restart_run(t_ns);
 }
 
@@ -206,7 +180,7 @@ void StretchEmulator::advance_to(TimeNs t_ns, std::vector<StretchEmulatedReport>
       if (powered_ && !on) {
         // Whatever sat in the board's buffers dies with the power.
         discard_batch();
-        held_.reset();
+        link_faults_.discard_held();
         powered_ = false;
       } else if (!powered_ && on) {
         boot(ev);
@@ -270,49 +244,10 @@ void StretchEmulator::emit(TimeNs send_ns, std::vector<StretchEmulatedReport>& o
 }
 
 void StretchEmulator::send(const StretchEmulatedReport& report, std::vector<StretchEmulatedReport>& out) {
-  const StretchEmulatorFaults& f = options_.faults;
-  // One draw per report from each stream, whatever the outcome.
-  const bool drop = drop_rng_.uniform01() < f.drop_probability;
-  const bool duplicate = duplicate_rng_.uniform01() < f.duplicate_probability;
-  const bool corrupt = corrupt_rng_.uniform01() < f.corrupt_probability;
-  const bool reorder = reorder_rng_.uniform01() < f.reorder_probability;
-  const std::uint64_t corrupt_byte = corrupt_rng_.below(kStretchDataReportSize);
-  const std::uint64_t corrupt_bit = corrupt_rng_.below(8);
-  if (drop) {
-    ++stats_.dropped;
-    return;
-  }
-  StretchEmulatedReport r = report;
-  if (corrupt) {
-    r.bytes[corrupt_byte] ^= static_cast<std::uint8_t>(1u << corrupt_bit);
-    ++stats_.corrupted;
-  }
-  if (reorder && !held_) {
-    held_ = r;
-    ++stats_.reordered;
-    return;
-  }
-  out.push_back(r);
-  ++stats_.reports_sent;
-  if (duplicate) {
-    out.push_back(r);
-    ++stats_.reports_sent;
-    ++stats_.duplicated;
-  }
-  if (held_) {
-    held_->send_ns = r.send_ns;
-    out.push_back(*held_);
-    ++stats_.reports_sent;
-    held_.reset();
-  }
+  link_faults_.send(report, options_.faults, stats_, out);
 }
 
-void StretchEmulator::flush(std::vector<StretchEmulatedReport>& out) {
-  if (!held_) return;
-  out.push_back(*held_);
-  ++stats_.reports_sent;
-  held_.reset();
-}
+void StretchEmulator::flush(std::vector<StretchEmulatedReport>& out) { link_faults_.flush(stats_, out); }
 
 StretchCommandResult StretchEmulator::handle_command(std::span<const std::uint8_t> bytes, TimeNs t_ns) {
   const TimeNs at = std::max(t_ns, now_ns_);

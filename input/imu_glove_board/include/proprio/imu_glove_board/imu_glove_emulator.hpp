@@ -10,8 +10,8 @@
 // corrupted and reordered reports, stale samples, and unplugging (the glove
 // loses power and boots again: counter and sequence restart).
 //
-// It depends on core only; whoever links proprio::sim does the wiring (see
-// tools/proprio/cmd_glove.cpp and tests/unit/test_glove_emulator.cpp).
+// It depends on core and hid only; whoever links proprio::sim does the wiring (see
+// tools/proprio/cmd_glove.cpp and tests/unit/input/imu_glove_board/test_glove_emulator.cpp).
 // Deterministic for a given seed. Not thread-safe.
 #include <array>
 #include <cstdint>
@@ -23,6 +23,7 @@
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/hid/emulator_faults.hpp"
 #include "proprio/imu_glove_board/imu_glove_protocol.hpp"
 
 namespace proprio::devices {
@@ -126,7 +127,8 @@ class ImuGloveEmulator {
   void send(const ImuGloveEmulatedReport& report, std::vector<ImuGloveEmulatedReport>& out);
 
   ImuGloveEmulatorOptions options_;
-  Rng drop_rng_, duplicate_rng_, corrupt_rng_, reorder_rng_, stale_rng_;
+  hid::EmulatorLinkFaults<ImuGloveEmulatedReport> link_faults_;  // drop, duplicate, corrupt, reorder
+  Rng stale_rng_;
   bool powered_ = false;
   TimeNs last_boot_ns_ = 0;
   bool streaming_ = true;
@@ -142,7 +144,6 @@ class ImuGloveEmulator {
   ImuGloveCommandResult last_result_ = ImuGloveCommandResult::none;
   std::vector<ImuGloveImuRaw> last_raw_;  // the last fresh values, which a stale sample repeats
   std::vector<ImuGloveImuRaw> tick_raw_;  // this tick's, per IMU
-  std::optional<ImuGloveEmulatedReport> held_;
   ImuGloveEmulatorStats stats_;
 };
 

@@ -31,6 +31,7 @@
 #include "proprio/core/random.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/hid/emulator_faults.hpp"
 #include "proprio/hid/emulator_server.hpp"
 #include "proprio/hid/hid_transport.hpp"
 #include "proprio/stretch_board/stretch_protocol.hpp"
@@ -165,7 +166,8 @@ class StretchEmulator {
 
   StretchEmulatorOptions options_;
   StretchCapacitanceProvider provider_;
-  Rng drop_rng_, duplicate_rng_, corrupt_rng_, reorder_rng_, overrun_rng_, saturate_rng_;
+  hid::EmulatorLinkFaults<StretchEmulatedReport> link_faults_;  // drop, duplicate, corrupt, reorder
+  Rng overrun_rng_, saturate_rng_;
   std::uint32_t full_scale_ff_ = 0;
   std::uint32_t parasitic_ff_ = 0;
   TimeNs now_ns_ = 0;
@@ -181,7 +183,6 @@ class StretchEmulator {
   StretchCommandResult last_result_ = StretchCommandResult::none;
   StretchDataReport batch_;  // measurements so far of the report being filled
   TimeNs batch_first_ns_ = 0;
-  std::optional<StretchEmulatedReport> held_;
   StretchEmulatorStats stats_;
 };
 

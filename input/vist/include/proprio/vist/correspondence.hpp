@@ -67,7 +67,7 @@ struct CorrespondenceOptions {
   // Sigma_c (4.9): isotropic noise, m (standard deviation). Besides the
   // triangulation noise it absorbs what the translation eta cannot: rotation
   // and finger-angle errors of the prediction. 7 mm was best in the
-  // simulated free-motion sessions (tests/unit/test_vist_correspondence.cpp)
+  // simulated free-motion sessions (tests/unit/input/vist/test_vist_correspondence.cpp)
   // with 5 mm predicted marker covariances (4 mm: -3 points of accuracy at
   // 2.5x the nominal prediction errors, 10 mm: more distractors accepted).
   double sigma_c_m = 0.007;

@@ -17,7 +17,7 @@
 // so F and G carry over unchanged; the measurement Jacobians are derived
 // afresh for this convention (the signs of 4.31 and 4.37 differ with the
 // residual convention) and checked against finite differences in
-// tests/unit/test_vist_filter.cpp.
+// tests/unit/input/vist/test_vist_filter.cpp.
 //
 // Geometry (eq. 4.28, Fig. 4.5): a point designed at x_in_segment on the
 // nominal glove sits, on the user's hand, at

@@ -647,7 +647,7 @@ TEST(FingertipEmulator, FeedbackSequencesRestartAtEveryBootAndTheClockWraps) {
 // Fuzz seeds.
 
 fs::path corpus_dir() {
-  return fs::path(__FILE__).parent_path().parent_path() / "fuzz" / "corpus" / "fingertip_protocol";
+  return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "fingertip_protocol";
 }
 void write_bytes(const fs::path& p, const Bytes& b) {
   std::ofstream out(p, std::ios::binary | std::ios::trunc);

@@ -726,7 +726,7 @@ TEST(StretchDevice, ASlowConsumerLosesMeasurementsAtTheRingNotTheReader) {
 // Fuzz seed corpus (tests/fuzz/corpus/stretch_protocol)
 
 fs::path corpus_dir() {
-  return fs::path(__FILE__).parent_path().parent_path() / "fuzz" / "corpus" / "stretch_protocol";
+  return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "stretch_protocol";
 }
 using proprio::testing_support::read_bytes;
 using proprio::testing_support::write_bytes;

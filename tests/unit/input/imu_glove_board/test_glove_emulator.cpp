@@ -428,7 +428,7 @@ TEST(GloveEmulator, RefusesBadOptionsAndInputsWithUsableMessages) {
 // ---------------------------------------------------------------------------
 // Fuzz seed corpus (tests/fuzz/corpus/glove_protocol)
 
-fs::path corpus_dir() { return fs::path(__FILE__).parent_path().parent_path() / "fuzz" / "corpus" / "glove_protocol"; }
+fs::path corpus_dir() { return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "glove_protocol"; }
 
 using proprio::testing_support::read_bytes;
 using proprio::testing_support::write_bytes;

@@ -142,11 +142,11 @@ int run_cli(int argc, char** argv, Family self, AddCommands add_commands) {
     if (command.family == self || (command.family == Family::split && self == Family::core)) {
       add_command(app, command.path);
     } else if (self == Family::core) {
-      CLI::App* stub = add_command(app, command.path);
-      stub->require_subcommand(0, 0);
-      stub->prefix_command();
-      stub->allow_extras();
-      stub->callback([&command, argv, &exit_code] { exit_code = exec_family(command, argv); });
+      CLI::App* forward = add_command(app, command.path);
+      forward->require_subcommand(0, 0);
+      forward->prefix_command();
+      forward->allow_extras();
+      forward->callback([&command, argv, &exit_code] { exit_code = exec_family(command, argv); });
     }
   }
   add_commands(app, exit_code);

@@ -21,6 +21,7 @@ endif()
 if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine)
   proprio_add_test(engine_scene_tests
     SOURCES unit/runtime/engine/test_engine_scene.cpp unit/runtime/engine/test_recentred_hands.cpp
+      unit/runtime/engine/test_wrist_calibration.cpp
     DEPS proprio::engine)
 
   proprio_add_test(engine_tests
@@ -58,4 +59,15 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::engine AND TARGET proprio_mock_openxr
     PROPRIO_XR_CAPTURE_DIR="${CMAKE_CURRENT_BINARY_DIR}/golden_out/xr_captures"
     PROPRIO_LAYER_MANIFEST_DIR="${_layer_manifest_dir}")
   add_dependencies(engine_xr_tests proprio_mock_openxr_runtime XrApiLayer_proprio_hand_tracking)
+
+  # `calibrate wrist` on the mock runtime's devices and moving hand: headless,
+  # no Vulkan, so not label render.
+  proprio_add_test(wrist_calibration_xr_tests
+    LABEL integration
+    SOURCES unit/runtime/engine/test_wrist_calibration_xr.cpp
+    DEPS proprio::engine proprio::openxr_layer_support
+    ENVIRONMENT "LSAN_OPTIONS=suppressions=${PROPRIO_OPENXR_LSAN_SUPPRESSIONS}")
+  target_include_directories(wrist_calibration_xr_tests PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/openxr/mock_runtime)
+  target_compile_definitions(wrist_calibration_xr_tests PRIVATE PROPRIO_MOCK_RUNTIME_JSON="${PROPRIO_MOCK_RUNTIME_JSON}")
+  add_dependencies(wrist_calibration_xr_tests proprio_mock_openxr_runtime)
 endif()

@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
+#include <vector>
 #include <string>
 
 #include "proprio/core/hand_model.hpp"
@@ -43,6 +45,46 @@ inline fs::path write_still_recording(const fs::path& dir, DurationNs span) {
   }
   (void)w->close();
   return file;
+}
+
+// The CSV an emulated source writes (proprio/sim/hand_truth_writer.hpp): one
+// HandPose per row, in the source's world frame, times on CLOCK_MONOTONIC.
+inline std::vector<HandPose> read_truth(const fs::path& file) {
+  std::vector<HandPose> rows;
+  std::ifstream in(file);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::stringstream ss(line);
+    std::string cell;
+    HandPose p;
+    p.active = true;
+    std::getline(ss, cell, ',');
+    p.time_ns = std::stoll(cell);
+    std::getline(ss, cell, ',');
+    p.hand = cell == "left" ? Handedness::left : Handedness::right;
+    double v[7];
+    for (std::size_t j = 0; j < kHandJointCount; ++j) {
+      for (double& x : v) {
+        std::getline(ss, cell, ',');
+        x = std::stod(cell);
+      }
+      p.T_world_joint[j] = Pose{Quat(v[3], v[4], v[5], v[6]), Vec3(v[0], v[1], v[2])};
+    }
+    rows.push_back(p);
+  }
+  return rows;
+}
+
+// The row nearest t_ns, or nullptr when none is within max_gap_ns.
+inline const HandPose* nearest(const std::vector<HandPose>& rows, TimeNs t_ns, DurationNs max_gap_ns) {
+  const HandPose* best = nullptr;
+  for (const auto& r : rows) {
+    if (std::llabs(r.time_ns - t_ns) <= max_gap_ns && (!best || std::llabs(r.time_ns - t_ns) < std::llabs(best->time_ns - t_ns))) {
+      best = &r;
+    }
+  }
+  return best;
 }
 
 }  // namespace layer_test

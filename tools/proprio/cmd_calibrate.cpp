@@ -113,19 +113,9 @@ int run_calibrate_stereo(const CalibrateStereoArgs& a) {
 }  // namespace
 
 void add_calibrate_command(CLI::App& app, int& exit_code) {
-  CLI::App* calibrate = add_command(app, "calibrate");
-
   auto args = std::make_shared<CalibrateStereoArgs>();
-  CLI::App* cmd = calibrate->add_subcommand(
-      "stereo",
-      "Calibrate VIST's stereo camera from checkerboard image pairs (docs/stereo-camera.md).\n"
-      "Writes the full calibration (intrinsics, distortion, extrinsics, rectification) to --out and prints the "
-      "rectified rig as a glove file [rig] table (also written to --rig-toml).\n"
-      "Images: a folder of pairs named left_000.png + right_000.png (names differing only in left/right), or left/ "
-      "and right/ subfolders with the same names, or side-by-side images (--side-by-side; left half = left camera).\n"
-      "Capturing from a live camera is not built in (there is no --from-camera): grab pairs with any tool, e.g. "
-      "'ffmpeg -f v4l2 -video_size 2560x720 -i /dev/video0 -vf fps=1 board_%03d.png' for a ZED Mini, holding the "
-      "board still in a new pose each second.");
+  // The description is the command table's (command_table.cpp): `calibrate` spans programs.
+  CLI::App* cmd = add_command(app, "calibrate stereo");
   cmd->add_option("--images", args->images, "Folder with the calibration images")->required();
   cmd->add_flag("--side-by-side", args->side_by_side, "Each image holds both cameras, left half = left camera");
   cmd->add_option("--board", args->board,

@@ -13,14 +13,12 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "proprio/core/file_io.hpp"
 #include "progress.hpp"
+#include "proprio/core/file_io.hpp"
 #include "proprio/core/log.hpp"
-#include "proprio/imu_glove_board/imu_glove_device.hpp"
 #include "proprio/imu_glove_board/imu_glove_protocol.hpp"
-#include "proprio/hid/hid_transport.hpp"
 #include "proprio/sim/subjects.hpp"
-#include "proprio/vist/vist_live.hpp"
+#include "proprio/vist/vist_live_source.hpp"
 #include "proprio/vist_eval/evaluation.hpp"
 
 namespace proprio::cli {
@@ -258,54 +256,32 @@ struct TrackVistArgs {
 };
 
 // The glove and the camera feed the tracker until Ctrl-C or --seconds; a
-// status line each interval says what arrives and where the hand is.
+// status line each interval says what arrives and where the hand is. The
+// wiring is the layer's own (vist::start_vist_devices): devices that are not
+// there yet are waited for.
 int run_track_vist_live(const TrackVistArgs& a) {
   auto glove = a.glove.empty() ? Result<ImuGloveDescription>(ImuGloveDescription::vist_default())
                                : ImuGloveDescription::load(a.glove);
   if (!glove) return report_error(glove.error());
-  vist::VistHandSourceOptions so;
-  so.tracker.hand = *parse_handedness(a.hand);  // CLI11 checked the name
-  auto source = vist::VistHandSource::create(*glove, so);
-  if (!source) return report_error(source.error());
-
-  hid::HidDeviceSelector sel;
-  sel.vendor_id = parse_hex_id(a.vid);
-  sel.product_id = parse_hex_id(a.pid);
-  sel.serial = a.imu_serial;
-  sel.path = a.imu_path;
-  auto imu_board = std::make_unique<devices::ImuGloveDevice>(std::make_unique<hid::HidapiTransport>(sel));
-  imu_board->set_state_callback([](hid::LinkState state, std::string_view detail) {
-    std::printf("[glove %s] %.*s\n", hid::to_string(state), static_cast<int>(detail.size()), detail.data());
-    std::fflush(stdout);
-  });
-
-  vist::StereoCameraOptions co;
-  const bool file = std::filesystem::is_regular_file(a.camera);
-  co.input = file ? vist::StereoInput::file : vist::StereoInput::device;
-  co.left = a.camera;
-  co.right = a.camera_right;
-  co.side_by_side = a.camera_right.empty();
-  co.width_px = glove->rig.camera.width_px;
-  co.height_px = glove->rig.camera.height_px;
-  co.fps = glove->rig.rate_hz;
-  co.reader_thread = !file;  // a live camera is drained continuously; a file is paced by VistLiveInput
-  co.calibration_file = a.calibration;
-  if (file) co.file_t0_ns = MonotonicClock::instance().now_ns();
-  auto camera = vist::StereoCamera::open(co);
-  if (!camera) return report_error(camera.error());
-  std::printf("%s\nglove: %s (IMU board %s)\ncamera: %s\n", glove->name.c_str(),
-              glove->origin.empty() ? "built-in thesis glove" : glove->origin.c_str(), sel.describe().c_str(),
-              (*camera)->describe().c_str());
+  vist::VistLiveSourceOptions so;
+  so.source.tracker.hand = *parse_handedness(a.hand);  // CLI11 checked the name
+  vist::VistDeviceOptions d;
+  d.imu.vendor_id = parse_hex_id(a.vid);
+  d.imu.product_id = parse_hex_id(a.pid);
+  d.imu.serial = a.imu_serial;
+  d.imu.path = a.imu_path;
+  d.camera = a.camera;
+  d.camera_right = a.camera_right;
+  d.stereo_calibration = a.calibration;
+  std::printf("%s\nglove: %s\ndevices: %s\n", glove->name.c_str(),
+              glove->origin.empty() ? "built-in thesis glove" : glove->origin.c_str(), d.describe().c_str());
   std::printf("the camera is taken as fixed (no HMD pose): the head at (0, 1.6, 0) m looking along -Z\n");
-  auto live = vist::VistLiveInput::create(**source, *glove, std::move(imu_board), std::move(*camera));
-  if (!live) return report_error(live.error());
+  std::fflush(stdout);
+  auto source = vist::start_vist_devices(*glove, d, so);
+  if (!source) return report_error(source.error());
 
   g_sigint_stop.store(false);
   auto previous = std::signal(SIGINT, on_sigint_stop);
-  if (auto s = (*live)->start(); !s) {
-    std::signal(SIGINT, previous);
-    return report_error(s.error());
-  }
   std::printf(a.seconds > 0 ? "tracking for %g s (Ctrl-C stops early)\n" : "tracking (Ctrl-C to stop)\n", a.seconds);
   const auto start = std::chrono::steady_clock::now();
   auto next_print = start + std::chrono::duration<double>(a.interval_s);
@@ -315,17 +291,18 @@ int run_track_vist_live(const TrackVistArgs& a) {
     const double elapsed = std::chrono::duration<double>(now - start).count();
     if (a.seconds > 0 && elapsed >= a.seconds) break;
     if (now >= next_print) {
-      const auto st = (*live)->stats();
-      const PoseLookup found = (*source)->lookup(so.tracker.hand, MonotonicClock::instance().now_ns(), pose);
+      const auto st = (*source)->live_stats();
+      const PoseLookup found = (*source)->lookup(so.source.tracker.hand, MonotonicClock::instance().now_ns(), pose);
       std::printf("%7.1fs glove %s, %llu IMU samples; camera %s, %llu frames, %.1f markers/frame; ", elapsed,
                   hid::to_string(st.glove_state), static_cast<unsigned long long>(st.imu_samples),
-                  vist::to_string(st.camera_state), static_cast<unsigned long long>(st.frames),
+                  st.camera_open ? vist::to_string(st.camera_state) : "not open",
+                  static_cast<unsigned long long>(st.frames),
                   st.frames ? static_cast<double>(st.markers_detected) / static_cast<double>(st.frames) : 0.0);
-      if (is_usable(found)) {
+      if (is_usable(found) && pose.active) {
         const Vec3 p = pose.joint(HandJoint::wrist).p;
         std::printf("wrist at (%.3f, %.3f, %.3f) m\n", p.x(), p.y(), p.z());
       } else {
-        std::printf("%s\n", found == PoseLookup::empty ? "no hand yet" : "no recent hand pose");
+        std::printf("%s\n", found == PoseLookup::empty ? "no hand yet" : "no hand now");
       }
       std::fflush(stdout);
       next_print += std::chrono::duration<double>(a.interval_s);
@@ -333,9 +310,10 @@ int run_track_vist_live(const TrackVistArgs& a) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   std::signal(SIGINT, previous);
-  const auto st = (*live)->stats();
-  (*live)->stop();
-  std::printf("\n%s\n%s\n", st.describe().c_str(), (*source)->stats().describe().c_str());
+  const auto st = (*source)->live_stats();
+  const auto tracker = (*source)->tracker_stats();
+  source->reset();
+  std::printf("\n%s\n%s\n", st.describe().c_str(), tracker.describe().c_str());
   return st.imu_samples > 0 && st.frames > 0 ? 0 : 1;
 }
 

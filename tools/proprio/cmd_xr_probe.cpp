@@ -1,5 +1,7 @@
 // proprio xr-probe: the OpenXR probe (proprio::engine, xr_probe.hpp) with its
 // report printed once a second, and its outcome as the exit status.
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -104,7 +106,49 @@ struct ProbePrinter {
                   percent(t.fully_tracked_joints, t.joints),
                   s.run_s > 0 ? static_cast<double>(t.distinct) / s.run_s : 0.0);
     }
+    for (const auto& [hand, l] : s.latency) print_latency(std::string(engine::to_string(hand)), l);
     std::fflush(stdout);
+  }
+  // p50/p99/max and a text histogram (the bins up to the p99.9 one, grouped to at most 16 rows).
+  static void print_latency(const std::string& hand, const engine::XrProbeLatency& l) {
+    using engine::XrProbeLatency;
+    std::printf("\n  %s hand: data age behind %llu served poses (XR_PROPRIO_hand_tracking_latency)\n", hand.c_str(),
+                static_cast<unsigned long long>(l.poses));
+    if (l.poses == 0) {
+      std::printf("    none served: no latency to report\n");
+      return;
+    }
+    const struct {
+      const char* label;
+      const std::vector<std::uint64_t>& bins;
+      double max_ms;
+    } rows[] = {{"sensor sample -> pose servable", l.sample_to_ready, l.max_sample_to_ready_ms},
+                {"sensor sample -> xrLocateHandJointsEXT", l.age_at_locate, l.max_age_at_locate_ms}};
+    for (const auto& r : rows) {
+      std::printf("    %-40s p50 <= %.1f ms, p99 <= %.1f ms, max %.2f ms\n", r.label,
+                  XrProbeLatency::quantile_ms(r.bins, l.bin_ms, 0.5), XrProbeLatency::quantile_ms(r.bins, l.bin_ms, 0.99),
+                  r.max_ms);
+    }
+    const auto& bins = l.age_at_locate;
+    const double upto_ms = XrProbeLatency::quantile_ms(bins, l.bin_ms, 0.999);
+    const std::size_t last = std::min(bins.size(), static_cast<std::size_t>(std::ceil(upto_ms / l.bin_ms)));
+    const std::size_t group = std::max<std::size_t>(1, (last + 15) / 16);
+    std::uint64_t biggest = 1, total = 0;
+    for (std::size_t i = 0; i < last; i += group) {
+      std::uint64_t c = 0;
+      for (std::size_t j = i; j < std::min(last, i + group); ++j) c += bins[j];
+      biggest = std::max(biggest, c);
+    }
+    for (auto c : bins) total += c;
+    std::printf("    sensor sample -> xrLocateHandJointsEXT, histogram:\n");
+    for (std::size_t i = 0; i < last; i += group) {
+      std::uint64_t c = 0;
+      for (std::size_t j = i; j < std::min(last, i + group); ++j) c += bins[j];
+      const int width = static_cast<int>(std::lround(40.0 * static_cast<double>(c) / static_cast<double>(biggest)));
+      std::printf("    %5.1f-%5.1f ms %6.2f%% %s\n", static_cast<double>(i) * l.bin_ms,
+                  static_cast<double>(std::min(last, i + group)) * l.bin_ms,
+                  100.0 * static_cast<double>(c) / static_cast<double>(total), std::string(static_cast<std::size_t>(width), '#').c_str());
+    }
   }
 };
 

@@ -34,5 +34,7 @@ void add_study_commands(CLI::App& app, int& exit_code);
 // `run SCENE`: the engine (proprio::engine).
 void add_run_command(CLI::App& app, int& exit_code);
 void add_xr_probe_command(CLI::App& app, int& exit_code);
+// `calibrate wrist`: the engine's OpenXR session and the layer's calibration file.
+void add_calibrate_wrist_command(CLI::App& app, int& exit_code);
 
 }  // namespace proprio::cli

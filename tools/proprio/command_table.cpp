@@ -40,8 +40,37 @@ constexpr CommandInfo kCommands[] = {
      "tick duration, wake-up jitter and overruns. Timings depend on the machine and its load.",
      Family::haptics, false},
     {"calibrate",
-     "Calibrate sensors: 'calibrate stereo' for VIST's camera, 'calibrate glove' for the stretch glove",
-     Family::trackers, true},
+     "Calibrate sensors: 'calibrate stereo' for VIST's camera, 'calibrate glove' for the stretch glove, "
+     "'calibrate wrist' for a tracked device's offset to the wrist",
+     Family::split, true},
+    {"calibrate stereo",
+     "Calibrate VIST's stereo camera from checkerboard image pairs (docs/stereo-camera.md).\n"
+     "Writes the full calibration (intrinsics, distortion, extrinsics, rectification) to --out and prints the "
+     "rectified rig as a glove file [rig] table (also written to --rig-toml).\n"
+     "Images: a folder of pairs named left_000.png + right_000.png (names differing only in left/right), or left/ "
+     "and right/ subfolders with the same names, or side-by-side images (--side-by-side; left half = left camera).\n"
+     "Capturing from a live camera is not built in (there is no --from-camera): grab pairs with any tool, e.g. "
+     "'ffmpeg -f v4l2 -video_size 2560x720 -i /dev/video0 -vf fps=1 board_%03d.png' for a ZED Mini, holding the "
+     "board still in a new pose each second.",
+     Family::trackers, false},
+    {"calibrate glove",
+     "Per-user min-max calibration of the stretch glove (Glauser 2019, Sec. 5.3.3): explore extreme poses while\n"
+     "the per-cell 20-frame medians' min and max are collected; prints which fingers need more movement.",
+     Family::trackers, false},
+#if defined(PROPRIO_HAVE_ENGINE) && defined(PROPRIO_HAVE_OPENXR_LAYER)
+    {"calibrate wrist",
+     "Measure where the wearer's wrist is relative to a tracked device, a VIVE-style wrist tracker "
+     "(XR_HTCX_vive_tracker_interaction) or the hand's controller (grip pose), so Proprio's OpenXR layer puts a "
+     "glove's fingers on the right wrist (layer config: wrist = \"tracker\" | \"controller\", "
+     "wrist_calibration). See docs/wrist-calibration.md.\n"
+     "Guided on stdout: a countdown, then hold the hand still in the pose it asks for; it starts again when you "
+     "move. --reference pose measures the wrist's rotation from that pose and the head's forward direction and "
+     "assumes its position (--wrist-below-device-m, --wrist-behind-grip-m); --reference runtime-hand takes the "
+     "whole offset from the runtime's own hand tracking (Proprio's layer is disabled in this process).\n"
+     "Writes [wrist] position_m, rotation_deg (the wrist in the device's grip frame) to a per-user file and "
+     "prints the layer config lines to paste.",
+     Family::engine, false},
+#endif
     {"record", "Record training data", Family::trackers, true},
     {"glove",
      "The USB HID IMU glove (7 IMUs at 100 Hz; protocol in docs/glove-hid-protocol.md): list devices, monitor a "

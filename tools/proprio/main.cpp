@@ -39,6 +39,9 @@ void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_cod
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
   add_xr_probe_command(app, exit_code);
 #endif
+#if defined(PROPRIO_HAVE_ENGINE) && defined(PROPRIO_HAVE_OPENXR_LAYER)
+  add_calibrate_wrist_command(app, exit_code);
+#endif
 #endif
 }
 

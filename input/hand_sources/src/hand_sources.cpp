@@ -67,11 +67,11 @@ void remember_inputs(const std::vector<std::filesystem::path>& inputs) {
 // vist: a VIST tracker fed by a recorded session; glove: the stretch glove
 // (a read-out board on USB, or a simulated wearer).
 Result<std::unique_ptr<HandSource>> start_in_plugin(const char* family, SourceConfig sc,
-                                                    DurationNs max_prediction_ns) {
+                                                    DurationNs max_prediction_ns, TrackedPoseProvider* poses) {
   auto plugin = load_plugin(family);
   if (!plugin) return plugin.error();
   if (sc.type == SourceType::glove && sc.model.empty()) sc.model = default_glove_model_path();
-  auto started = (*plugin)->start(sc, max_prediction_ns);
+  auto started = (*plugin)->start(sc, max_prediction_ns, poses);
   if (!started) return started.error();
   if (!started->source) return make_error(Errc::unavailable, std::string(family) + " plugin started no source");
   remember_inputs(started->inputs);
@@ -82,13 +82,14 @@ Result<std::unique_ptr<HandSource>> start_in_plugin(const char* family, SourceCo
 
 std::string default_glove_model_path() { return data_path("models/stretch_glove_generic.onnx"); }
 
-Result<std::unique_ptr<HandSource>> start_hand_source(const SourceConfig& config, DurationNs max_prediction_ns) {
+Result<std::unique_ptr<HandSource>> start_hand_source(const SourceConfig& config, DurationNs max_prediction_ns,
+                                                      TrackedPoseProvider* poses) {
   Result<std::unique_ptr<HandSource>> source = make_error(Errc::invalid_argument, "unknown source type");
   switch (config.type) {
     case SourceType::sim: source = start_sim(config, max_prediction_ns); break;
     case SourceType::replay: source = start_replay(config, max_prediction_ns); break;
-    case SourceType::vist: source = start_in_plugin("vist", config, max_prediction_ns); break;
-    case SourceType::glove: source = start_in_plugin("stretch_glove", config, max_prediction_ns); break;
+    case SourceType::vist: source = start_in_plugin("vist", config, max_prediction_ns, poses); break;
+    case SourceType::glove: source = start_in_plugin("stretch_glove", config, max_prediction_ns, poses); break;
   }
   if (!source) return source.error().with_context(std::string(to_string(config.type)) + " source");
   return source;

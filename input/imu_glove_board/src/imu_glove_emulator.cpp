@@ -1,5 +1,6 @@
 #include "proprio/imu_glove_board/imu_glove_emulator.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -255,6 +256,35 @@ std::array<std::uint8_t, kImuGloveInfoReportSize> ImuGloveEmulator::info_report(
   info.last_command_result = last_result_;
   info.timestamp_us = device_timestamp_us(t_ns);
   return encode_info_report(info);
+}
+
+// ---------------------------------------------------------------------------
+
+void ImuGloveEmulatorServerTraits::advance(ImuGloveTicker& glove, const ImuGloveServeOptions&, TimeNs now_ns,
+                                           std::vector<ImuGloveEmulatedReport>& out) {
+  const std::size_t imus = glove.emulator.options().imu_count;
+  while (glove.next_tick_ns <= now_ns) {
+    glove.scratch.assign(imus, ImuSample{});
+    for (std::size_t i = 0; i < imus; ++i) glove.scratch[i].sensor_id = static_cast<std::uint16_t>(i);
+    if (glove.readings) glove.readings(glove.ticks, glove.next_tick_ns, glove.scratch);
+    if (!glove.emulator.tick(glove.next_tick_ns, glove.scratch, out)) ++glove.refused_ticks;
+    ++glove.ticks;
+    glove.next_tick_ns += kNsPerSecond / std::max<std::uint16_t>(glove.emulator.rate_hz(), 1);
+  }
+}
+
+void ImuGloveEmulatorServerTraits::handle_command(ImuGloveTicker& glove, std::span<const std::uint8_t> bytes, TimeNs) {
+  (void)glove.emulator.handle_command(bytes);
+}
+
+std::size_t ImuGloveEmulatorServerTraits::feature(ImuGloveTicker& glove, std::uint8_t report_id, TimeNs now_ns,
+                                                  std::span<std::uint8_t> out) {
+  if (report_id != static_cast<std::uint8_t>(ImuGloveReportId::device_info) || out.size() < kImuGloveInfoReportSize) {
+    return 0;
+  }
+  const auto info = glove.emulator.info_report(now_ns);
+  std::copy(info.begin(), info.end(), out.begin());
+  return info.size();
 }
 
 }  // namespace proprio::devices

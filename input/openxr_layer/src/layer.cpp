@@ -7,11 +7,17 @@
 //  - Hooks only what the app enabled; our extensions are stripped before the
 //    runtime sees the instance create info.
 //  - xrLocateHandJointsEXT takes a shared lock and never allocates.
+//  - What the layer asks the runtime for itself (the headset's pose for a
+//    head-mounted camera, a wrist from a controller, a tracker or the
+//    runtime's own hand tracking) it asks only when a configured source needs
+//    it, and never disturbs the app's own actions (runtime_poses below).
 #include "proprio/core/xr_ext.hpp"  // first: it switches on XR_USE_TIMESPEC
 
 #include <pthread.h>
 
 #include <array>
+#include <atomic>
+#include <cmath>
 #include <cstring>
 #include <ctime>
 #include <memory>
@@ -26,16 +32,18 @@
 #include "proprio/core/xr_interop.hpp"
 #include "proprio/hand_sources/hand_sources.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
+#include "proprio/openxr/XR_PROPRIO_hand_tracking_latency.h"
 #include "proprio/openxr_layer/loader_interfaces.hpp"
-#include "proprio/core/xr_ext.hpp"
 
 namespace proprio::openxr_layer {
 namespace {
 
 constexpr const char* kLayerName = "XR_APILAYER_PROPRIO_hand_tracking";
-constexpr std::array<std::string_view, 3> kOurExtensions = {
+constexpr std::array<std::string_view, 4> kOurExtensions = {
     XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_EXT_HAND_JOINTS_MOTION_RANGE_EXTENSION_NAME,
-    XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME};
+    XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME, XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME};
+// The layer's own action set: a name an app will not pick, the lowest priority.
+constexpr const char* kActionSetName = "proprio_layer_wrist";
 
 struct Downstream {
   PFN_xrGetInstanceProcAddr get_instance_proc_addr = nullptr;
@@ -47,6 +55,41 @@ struct Downstream {
   PFN_xrDestroySpace destroy_space = nullptr;
   PFN_xrLocateSpace locate_space = nullptr;
   PFN_xrConvertTimeToTimespecTimeKHR convert_time_to_timespec = nullptr;
+  PFN_xrConvertTimespecTimeToTimeKHR convert_timespec_to_time = nullptr;
+  // Only resolved when a source takes its wrist from the runtime.
+  PFN_xrStringToPath string_to_path = nullptr;
+  PFN_xrCreateActionSet create_action_set = nullptr;
+  PFN_xrCreateAction create_action = nullptr;
+  PFN_xrSuggestInteractionProfileBindings suggest_bindings = nullptr;
+  PFN_xrAttachSessionActionSets attach_action_sets = nullptr;
+  PFN_xrSyncActions sync_actions = nullptr;
+  PFN_xrCreateActionSpace create_action_space = nullptr;
+  PFN_xrBeginFrame begin_frame = nullptr;
+  PFN_xrPollEvent poll_event = nullptr;
+  PFN_xrCreateHandTrackerEXT create_hand_tracker = nullptr;
+  PFN_xrDestroyHandTrackerEXT destroy_hand_tracker = nullptr;
+  PFN_xrLocateHandJointsEXT locate_hand_joints = nullptr;
+};
+
+// The head pose for a source's head-mounted camera, from the app's runtime.
+// Sources call it on their own threads; it finds its instance through the
+// registry each time (never a raw pointer that could dangle), so it answers
+// false before the instance exists, without a session, and after it is gone.
+class RuntimeHeadProvider final : public TrackedPoseProvider {
+ public:
+  explicit RuntimeHeadProvider(std::size_t config_index) : config_index_(config_index) {}
+  void bind(XrInstance instance) noexcept { instance_.store(instance, std::memory_order_release); }
+  bool locate(TrackedPose what, TimeNs t_ns, Pose& T_world_x) noexcept override;
+
+ private:
+  std::size_t config_index_;
+  std::atomic<XrInstance> instance_{XR_NULL_HANDLE};
+};
+
+// What the wrist of a source's hands comes from, resolved at start-up.
+struct WristPlan {
+  WristSource kind = WristSource::source;
+  Pose T_device_wrist;
 };
 
 struct HandBinding {
@@ -60,13 +103,45 @@ struct Instance {
   bool hand_tracking = false;  // the app enabled XR_EXT_hand_tracking
   bool motion_range = false;
   bool data_source = false;
+  bool latency = false;   // XR_PROPRIO_hand_tracking_latency
   bool serving = false;  // Proprio implements hand tracking for this instance
+  bool app_vive_tracker = false;    // the app itself enabled XR_HTCX_vive_tracker_interaction
+  bool vive_tracker = false;        // enabled downstream (by the app or for a tracker wrist)
+  bool runtime_hands = false;       // XR_EXT_hand_tracking enabled downstream for a runtime_hand wrist
   LayerConfig config;
+  // Declared before the sources: a source may call its provider until it stops.
+  std::vector<std::unique_ptr<RuntimeHeadProvider>> head_providers;
   std::vector<std::unique_ptr<HandSource>> sources;
   std::array<HandBinding, 2> hands{};  // indexed by Handedness
+  std::array<WristPlan, 2> wrist{};    // per hand
+
+  // The layer's wrist actions (controller and tracker wrists only).
+  XrActionSet action_set = XR_NULL_HANDLE;
+  XrAction grip_action = XR_NULL_HANDLE;     // subaction paths /user/hand/{left,right}
+  XrAction tracker_action = XR_NULL_HANDLE;  // subaction paths: the trackers' role paths
+  std::array<XrPath, 2> hand_paths{}, tracker_paths{};
+  // Our suggested bindings per interaction profile, merged into the app's.
+  std::vector<std::pair<XrPath, std::vector<XrActionSuggestedBinding>>> our_bindings;
+  std::vector<XrPath> app_suggested;  // profiles the app suggested for (guarded by the registry lock)
 
   bool any_hand() const { return hands[0].source || hands[1].source; }
+  bool wants_actions() const { return action_set != XR_NULL_HANDLE; }
 };
+
+struct Session {
+  XrSession handle = XR_NULL_HANDLE;
+  Instance* instance = nullptr;
+  XrSpace view_space = XR_NULL_HANDLE;
+  std::vector<XrSpace> source_spaces;  // per configured source, the source origin
+  std::array<XrSpace, 2> wrist_spaces{};  // per hand: the layer's action space for the wrist device
+  bool attached = false;  // our action set went along with the app's
+  // An app that attaches no action sets of its own within its first
+  // kAttachAloneAfterFrames frames gets ours attached alone, synced each frame.
+  std::atomic<std::uint32_t> frames{0};
+  std::atomic<bool> app_attached{false};
+  std::atomic<bool> attached_alone{false};
+};
+constexpr std::uint32_t kAttachAloneAfterFrames = 90;
 
 struct Tracker {
   Instance* instance = nullptr;
@@ -75,6 +150,17 @@ struct Tracker {
   HandBinding binding;
   XrSpace source_space = XR_NULL_HANDLE;  // the source origin, as a reference space with the configured offset
   bool unobstructed_requested = true;     // XR_EXT_hand_tracking_data_source
+  XrHandTrackerEXT runtime_hand = XR_NULL_HANDLE;  // the runtime's own tracker, for a runtime_hand wrist
+  XrSpace wrist_space = XR_NULL_HANDLE;            // the session's action space for this hand's wrist device
+  // The last wrist the runtime gave, shown (not tracked) while it is lost.
+  mutable std::mutex wrist_mutex;
+  mutable Pose last_T_base_wrist;
+  mutable XrSpace last_wrist_base = XR_NULL_HANDLE;
+  mutable TimeNs last_wrist_ns = 0;
+  // XR_PROPRIO_hand_tracking_latency: lock-free, locate may run on many threads.
+  mutable std::array<std::atomic<std::uint64_t>, XR_PROPRIO_LATENCY_BIN_COUNT> sample_to_ready{}, age_at_locate{};
+  mutable std::atomic<std::uint64_t> pose_count{0};
+  mutable std::atomic<std::int64_t> max_sample_to_ready_ns{0}, max_age_ns{0};
 };
 
 // A reader-writer lock that lets a waiting writer in. glibc's default (what
@@ -106,7 +192,7 @@ class WriterFairSharedMutex {
 struct Registry {
   WriterFairSharedMutex mutex;
   std::unordered_map<XrInstance, std::unique_ptr<Instance>> instances;
-  std::unordered_map<XrSession, Instance*> sessions;
+  std::unordered_map<XrSession, std::unique_ptr<Session>> sessions;
   std::unordered_map<XrHandTrackerEXT, std::unique_ptr<Tracker>> trackers;
 };
 Registry& registry() {
@@ -162,25 +248,43 @@ void start_sources(Instance& inst) {
     return;
   }
   inst.config = std::move(*cfg);
-  for (const SourceConfig& sc : inst.config.sources) {
-    auto started = hand_sources::start_hand_source(sc, inst.config.max_prediction_ns);
+  for (std::size_t i = 0; i < inst.config.sources.size(); ++i) {
+    SourceConfig& sc = inst.config.sources[i];
+    if (!sc.wrist_calibration.empty()) {
+      auto offset = load_wrist_calibration(sc.wrist_calibration);
+      if (!offset) {
+        logger().error("Proprio layer: {}: [[source]] #{}: {}", inst.config.origin, i + 1, offset.error().message);
+        continue;
+      }
+      sc.T_device_wrist = *offset;
+    }
+    inst.head_providers.push_back(std::make_unique<RuntimeHeadProvider>(i));
+    auto started = hand_sources::start_hand_source(sc, inst.config.max_prediction_ns, inst.head_providers.back().get());
     if (!started) {
       logger().error("Proprio layer: {}: {}", inst.config.origin, started.error().message);
       continue;
     }
     std::unique_ptr<HandSource> source = std::move(*started);
-    const SourceConfig* config = &sc;
     for (Handedness h : sc.hands) {
-      auto& binding = inst.hands[static_cast<std::size_t>(h)];
+      const auto hi = static_cast<std::size_t>(h);
+      auto& binding = inst.hands[hi];
       if (binding.source) {
         logger().warn("Proprio layer: the {} hand already has a source; the later one is ignored for it", to_string(h));
       } else if (source->available(h)) {
-        binding = {source.get(), config};
+        binding = {source.get(), &sc};
+        inst.wrist[hi] = {sc.wrist, sc.T_device_wrist};
       }
     }
     inst.sources.push_back(std::move(source));
   }
   logger().info("Proprio layer: {}", inst.config.describe());
+}
+
+bool any_wrist(const Instance& inst, WristSource kind) {
+  for (std::size_t h = 0; h < 2; ++h) {
+    if (inst.hands[h].source && inst.wrist[h].kind == kind) return true;
+  }
+  return false;
 }
 
 Instance* find_instance_locked(XrInstance handle) {
@@ -222,6 +326,64 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_system_properties(XrInstance instance, 
   });
 }
 
+// A reference space for the session, or XR_NULL_HANDLE (logged) if the runtime refuses.
+XrSpace make_reference_space(const Instance& inst, XrSession session, XrReferenceSpaceType type, const Pose& pose,
+                             const char* what) {
+  auto info = xr_struct<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
+  info.referenceSpaceType = type;
+  info.poseInReferenceSpace = proprio::to_xr(pose);
+  XrSpace space = XR_NULL_HANDLE;
+  if (const XrResult r = inst.next.create_reference_space(session, &info, &space); XR_FAILED(r)) {
+    logger().error("Proprio layer: the runtime refused the {} space ({})", what, static_cast<int>(r));
+    return XR_NULL_HANDLE;
+  }
+  return space;
+}
+
+// A head-mounted camera needs to know where the head was at each capture.
+bool needs_head(const SourceConfig& sc) { return sc.type == SourceType::vist && sc.input != "replay"; }
+
+// The spaces the layer locates itself in a session: the head, each source's
+// origin and the wrist devices' action spaces.
+std::unique_ptr<Session> make_session(Instance& inst, XrSession handle) {
+  auto s = std::make_unique<Session>();
+  s->handle = handle;
+  s->instance = &inst;
+  if (std::any_of(inst.config.sources.begin(), inst.config.sources.end(), needs_head)) {
+    s->view_space = make_reference_space(inst, handle, XR_REFERENCE_SPACE_TYPE_VIEW, Pose{}, "VIEW");
+    for (const SourceConfig& sc : inst.config.sources) {
+      s->source_spaces.push_back(make_reference_space(inst, handle, to_xr(sc.space), sc.T_space_source, "source origin"));
+    }
+  }
+  for (std::size_t h = 0; h < 2 && inst.wants_actions(); ++h) {
+    const WristSource kind = inst.wrist[h].kind;
+    if (!inst.hands[h].source || (kind != WristSource::controller && kind != WristSource::tracker)) continue;
+    const bool tracker = kind == WristSource::tracker;
+    if (tracker && inst.tracker_action == XR_NULL_HANDLE) continue;  // the runtime has no trackers
+    auto info = xr_struct<XrActionSpaceCreateInfo>(XR_TYPE_ACTION_SPACE_CREATE_INFO);
+    info.action = tracker ? inst.tracker_action : inst.grip_action;
+    info.subactionPath = tracker ? inst.tracker_paths[h] : inst.hand_paths[h];
+    info.poseInActionSpace = proprio::to_xr(Pose{});
+    if (const XrResult r = inst.next.create_action_space(handle, &info, &s->wrist_spaces[h]); XR_FAILED(r)) {
+      logger().error("Proprio layer: the runtime refused the {} hand's wrist {} space ({})",
+                     to_string(static_cast<Handedness>(h)), tracker ? "tracker" : "controller", static_cast<int>(r));
+      s->wrist_spaces[h] = XR_NULL_HANDLE;
+    }
+  }
+  return s;
+}
+
+void release_session(Session& s) {
+  const Downstream& d = s.instance->next;
+  auto drop = [&](XrSpace& space) {
+    if (space != XR_NULL_HANDLE) d.destroy_space(space);
+    space = XR_NULL_HANDLE;
+  };
+  drop(s.view_space);
+  for (XrSpace& space : s.source_spaces) drop(space);
+  for (XrSpace& space : s.wrist_spaces) drop(space);
+}
+
 XRAPI_ATTR XrResult XRAPI_CALL layer_create_session(XrInstance instance, const XrSessionCreateInfo* info,
                                                     XrSession* session) {
   return guarded("xrCreateSession", [&] {
@@ -229,17 +391,20 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_session(XrInstance instance, const X
     if (!inst) return XR_ERROR_HANDLE_INVALID;
     const XrResult r = inst->next.create_session(instance, info, session);
     if (XR_SUCCEEDED(r)) {
+      auto state = make_session(*inst, *session);
       std::unique_lock lock(registry().mutex);
-      registry().sessions[*session] = inst;
+      registry().sessions[*session] = std::move(state);
     }
     return r;
   });
 }
 
-// Removes a tracker's downstream space. Caller holds the registry exclusively.
+// Removes a tracker's downstream handles. Caller holds the registry exclusively.
 void release_tracker(Tracker& t) {
   if (t.source_space != XR_NULL_HANDLE) t.instance->next.destroy_space(t.source_space);
   t.source_space = XR_NULL_HANDLE;
+  if (t.runtime_hand != XR_NULL_HANDLE) t.instance->next.destroy_hand_tracker(t.runtime_hand);
+  t.runtime_hand = XR_NULL_HANDLE;
 }
 
 // Child handles go with their parent (OpenXR handle lifetime rules). Caller
@@ -263,8 +428,9 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_session(XrSession session) {
     std::unique_lock lock(r.mutex);
     auto it = r.sessions.find(session);
     if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
-    Instance* inst = it->second;
+    Instance* inst = it->second->instance;
     erase_trackers_if([&](const Tracker& t) { return t.session == session; });
+    release_session(*it->second);
     r.sessions.erase(it);
     return inst->next.destroy_session(session);
   });
@@ -279,17 +445,349 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_instance(XrInstance instance) {
       auto it = r.instances.find(instance);
       if (it == r.instances.end()) return XR_ERROR_HANDLE_INVALID;
       erase_trackers_if([&](const Tracker& t) { return t.instance == it->second.get(); });
+      // The runtime destroys the sessions' children with the instance.
       for (auto s = r.sessions.begin(); s != r.sessions.end();) {
-        s = s->second == it->second.get() ? r.sessions.erase(s) : std::next(s);
+        s = s->second->instance == it->second.get() ? r.sessions.erase(s) : std::next(s);
       }
       owned = std::move(it->second);
       r.instances.erase(it);
     }
-    // Sources (and their threads) stop outside the lock.
+    // Sources (and their threads) stop outside the lock, before the runtime
+    // goes: a head provider asking now finds no instance and answers false.
+    owned->sources.clear();
     const XrResult result = owned->next.destroy_instance(instance);
     owned.reset();
     return result;
   });
+}
+
+// ---- the wrist actions -------------------------------------------------------
+//
+// The layer's action set rides along with the app's, as input-remapping
+// layers do: its bindings are appended to the app's suggestion for the same
+// interaction profile (a later suggestion for a profile replaces an earlier
+// one, so suggesting separately would erase the app's or ours), suggested
+// alone at attach time for profiles the app did not name, attached with the
+// app's sets and synced with them. The app's actions, bindings and priorities
+// are untouched. An app that never attaches action sets gets no
+// controller or tracker wrist (the hand is shown at the source's own wrist).
+
+Result<XrPath> to_path(const Instance& inst, const std::string& text) {
+  XrPath path = XR_NULL_PATH;
+  if (const XrResult r = inst.next.string_to_path(inst.handle, text.c_str(), &path); XR_FAILED(r)) {
+    return make_error(Errc::invalid_argument, "the runtime refused the path " + text + " (" + std::to_string(r) + ")");
+  }
+  return path;
+}
+
+// Creates the action set and its pose actions, and plans the bindings. Errors
+// leave the instance without actions (logged by the caller).
+Status create_wrist_actions(Instance& inst) {
+  const bool want_controller = any_wrist(inst, WristSource::controller);
+  const bool want_tracker = any_wrist(inst, WristSource::tracker) && inst.vive_tracker;
+  if (!want_controller && !want_tracker) return {};
+  auto set_info = xr_struct<XrActionSetCreateInfo>(XR_TYPE_ACTION_SET_CREATE_INFO);
+  std::snprintf(set_info.actionSetName, sizeof set_info.actionSetName, "%s", kActionSetName);
+  std::snprintf(set_info.localizedActionSetName, sizeof set_info.localizedActionSetName, "Proprio glove wrist");
+  set_info.priority = 0;
+  if (const XrResult r = inst.next.create_action_set(inst.handle, &set_info, &inst.action_set); XR_FAILED(r)) {
+    return make_error(Errc::unavailable, "the runtime refused the layer's action set (" + std::to_string(r) + ")");
+  }
+  auto make_action = [&](const char* name, const char* label, const std::array<XrPath, 2>& subactions,
+                         XrAction& action) -> Status {
+    auto info = xr_struct<XrActionCreateInfo>(XR_TYPE_ACTION_CREATE_INFO);
+    std::snprintf(info.actionName, sizeof info.actionName, "%s", name);
+    std::snprintf(info.localizedActionName, sizeof info.localizedActionName, "%s", label);
+    info.actionType = XR_ACTION_TYPE_POSE_INPUT;
+    info.countSubactionPaths = 2;
+    info.subactionPaths = subactions.data();
+    if (const XrResult r = inst.next.create_action(inst.action_set, &info, &action); XR_FAILED(r)) {
+      return make_error(Errc::unavailable, std::string("the runtime refused the layer's ") + name + " action (" +
+                                               std::to_string(r) + ")");
+    }
+    return {};
+  };
+  auto bind = [&](const std::string& profile, XrAction action, const std::string& binding) -> Status {
+    auto profile_path = to_path(inst, profile);
+    if (!profile_path) return profile_path.error();
+    auto binding_path = to_path(inst, binding);
+    if (!binding_path) return binding_path.error();
+    for (auto& [p, list] : inst.our_bindings) {
+      if (p == *profile_path) {
+        list.push_back({action, *binding_path});
+        return {};
+      }
+    }
+    inst.our_bindings.push_back({*profile_path, {{action, *binding_path}}});
+    return {};
+  };
+  const char* hand_names[2] = {"left", "right"};
+  for (int h = 0; h < 2; ++h) {
+    auto p = to_path(inst, std::string("/user/hand/") + hand_names[h]);
+    if (!p) return p.error();
+    inst.hand_paths[h] = *p;
+  }
+  if (want_controller) {
+    if (auto st = make_action("wrist_grip", "Glove wrist (controller grip)", inst.hand_paths, inst.grip_action); !st) {
+      return st;
+    }
+    // The grip pose of the profiles most runtimes bind (a runtime binds the
+    // profiles it knows and ignores the rest).
+    for (const char* profile : {"/interaction_profiles/khr/simple_controller", "/interaction_profiles/oculus/touch_controller",
+                                "/interaction_profiles/valve/index_controller", "/interaction_profiles/htc/vive_controller"}) {
+      for (int h = 0; h < 2; ++h) {
+        if (auto st = bind(profile, inst.grip_action, std::string("/user/hand/") + hand_names[h] + "/input/grip/pose"); !st) {
+          return st;
+        }
+      }
+    }
+  }
+  if (want_tracker) {
+    // Which hand's source uses which role; a hand without a tracker wrist
+    // still needs a distinct subaction path, so it gets its configured role too.
+    for (int h = 0; h < 2; ++h) {
+      const SourceConfig* sc = inst.hands[h].config;
+      const std::string role = sc ? sc->tracker_role[h] : (h == 0 ? "left_wrist" : "right_wrist");
+      auto p = to_path(inst, "/user/vive_tracker_htcx/role/" + role);
+      if (!p) return p.error();
+      inst.tracker_paths[h] = *p;
+    }
+    if (inst.tracker_paths[0] == inst.tracker_paths[1]) {
+      return make_error(Errc::invalid_argument, "both hands name the same tracker role");
+    }
+    if (auto st = make_action("wrist_tracker", "Glove wrist (tracker)", inst.tracker_paths, inst.tracker_action); !st) {
+      return st;
+    }
+    for (int h = 0; h < 2; ++h) {
+      if (!inst.hands[h].config) continue;
+      const std::string role = inst.hands[h].config->tracker_role[h];
+      if (auto st = bind("/interaction_profiles/htc/vive_tracker_htcx", inst.tracker_action,
+                         "/user/vive_tracker_htcx/role/" + role + "/input/grip/pose");
+          !st) {
+        return st;
+      }
+    }
+  }
+  return {};
+}
+
+const std::vector<XrActionSuggestedBinding>* our_bindings_for(const Instance& inst, XrPath profile) {
+  for (const auto& [p, list] : inst.our_bindings) {
+    if (p == profile) return &list;
+  }
+  return nullptr;
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_suggest_bindings(XrInstance instance,
+                                                      const XrInteractionProfileSuggestedBinding* suggested) {
+  return guarded("xrSuggestInteractionProfileBindings", [&] {
+    Instance* inst = find_instance(instance);
+    if (!inst) return XR_ERROR_HANDLE_INVALID;
+    if (!suggested || suggested->type != XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING ||
+        (suggested->countSuggestedBindings > 0 && !suggested->suggestedBindings)) {
+      return inst->next.suggest_bindings(instance, suggested);  // the runtime gives the exact error
+    }
+    const auto* ours = our_bindings_for(*inst, suggested->interactionProfile);
+    XrResult r;
+    if (!ours) {
+      r = inst->next.suggest_bindings(instance, suggested);
+    } else {
+      std::vector<XrActionSuggestedBinding> merged(suggested->suggestedBindings,
+                                                   suggested->suggestedBindings + suggested->countSuggestedBindings);
+      merged.insert(merged.end(), ours->begin(), ours->end());
+      XrInteractionProfileSuggestedBinding down = *suggested;
+      down.countSuggestedBindings = static_cast<uint32_t>(merged.size());
+      down.suggestedBindings = merged.data();
+      r = inst->next.suggest_bindings(instance, &down);
+      if (XR_FAILED(r) && r != XR_ERROR_ACTIONSETS_ALREADY_ATTACHED) {
+        // Never let ours cost the app its bindings: try the app's alone.
+        logger().warn("Proprio layer: the runtime refused the wrist bindings merged into the app's ({}); "
+                      "the app's alone are suggested", static_cast<int>(r));
+        r = inst->next.suggest_bindings(instance, suggested);
+      }
+    }
+    if (XR_SUCCEEDED(r)) {
+      std::unique_lock lock(registry().mutex);
+      auto& list = inst->app_suggested;
+      if (std::find(list.begin(), list.end(), suggested->interactionProfile) == list.end()) {
+        list.push_back(suggested->interactionProfile);
+      }
+    }
+    return r;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_attach_action_sets(XrSession session, const XrSessionActionSetsAttachInfo* info) {
+  return guarded("xrAttachSessionActionSets", [&] {
+    Instance* inst;
+    std::vector<XrPath> app_profiles;
+    {
+      std::shared_lock lock(registry().mutex);
+      auto it = registry().sessions.find(session);
+      if (it == registry().sessions.end()) return XR_ERROR_HANDLE_INVALID;
+      inst = it->second->instance;
+      app_profiles = inst->app_suggested;
+    }
+    if (!info || info->type != XR_TYPE_SESSION_ACTION_SETS_ATTACH_INFO || info->countActionSets == 0 ||
+        !info->actionSets) {
+      return inst->next.attach_action_sets(session, info);
+    }
+    {
+      std::shared_lock lock(registry().mutex);
+      auto it = registry().sessions.find(session);
+      if (it != registry().sessions.end() && it->second->attached_alone) {
+        logger().error("Proprio layer: the app attaches its action sets after its first {} frames, when the layer "
+                       "had attached its wrist actions alone; the runtime refuses a second attach",
+                       kAttachAloneAfterFrames);
+      }
+    }
+    // Profiles the app did not suggest for get ours alone (suggesting after an
+    // attach is an error, so this is the last chance).
+    for (const auto& [profile, list] : inst->our_bindings) {
+      if (std::find(app_profiles.begin(), app_profiles.end(), profile) != app_profiles.end()) continue;
+      auto s = xr_struct<XrInteractionProfileSuggestedBinding>(XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING);
+      s.interactionProfile = profile;
+      s.countSuggestedBindings = static_cast<uint32_t>(list.size());
+      s.suggestedBindings = list.data();
+      if (const XrResult r = inst->next.suggest_bindings(inst->handle, &s); XR_FAILED(r)) {
+        logger().debug("Proprio layer: the runtime refused the wrist bindings for a profile ({})", static_cast<int>(r));
+      }
+    }
+    std::vector<XrActionSet> sets(info->actionSets, info->actionSets + info->countActionSets);
+    sets.push_back(inst->action_set);
+    XrSessionActionSetsAttachInfo down = *info;
+    down.countActionSets = static_cast<uint32_t>(sets.size());
+    down.actionSets = sets.data();
+    XrResult r = inst->next.attach_action_sets(session, &down);
+    const bool ours = XR_SUCCEEDED(r);
+    if (XR_FAILED(r) && r != XR_ERROR_ACTIONSETS_ALREADY_ATTACHED && r != XR_ERROR_HANDLE_INVALID) {
+      logger().warn("Proprio layer: the runtime refused the app's action sets with the layer's ({}); "
+                    "attaching the app's alone, without a controller or tracker wrist", static_cast<int>(r));
+      r = inst->next.attach_action_sets(session, info);
+    }
+    {
+      std::unique_lock lock(registry().mutex);
+      if (auto it = registry().sessions.find(session); it != registry().sessions.end()) {
+        it->second->attached = it->second->attached || ours;
+        it->second->app_attached = true;
+      }
+    }
+    return r;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_sync_actions(XrSession session, const XrActionsSyncInfo* info) {
+  return guarded("xrSyncActions", [&] {
+    Instance* inst;
+    bool attached;
+    {
+      std::shared_lock lock(registry().mutex);
+      auto it = registry().sessions.find(session);
+      if (it == registry().sessions.end()) return XR_ERROR_HANDLE_INVALID;
+      inst = it->second->instance;
+      attached = it->second->attached;
+    }
+    if (!attached || !info || info->type != XR_TYPE_ACTIONS_SYNC_INFO || info->countActiveActionSets == 0 ||
+        !info->activeActionSets || info->countActiveActionSets > 64) {
+      return inst->next.sync_actions(session, info);
+    }
+    // A fixed array: this runs every frame.
+    std::array<XrActiveActionSet, 65> sets;
+    std::copy(info->activeActionSets, info->activeActionSets + info->countActiveActionSets, sets.begin());
+    sets[info->countActiveActionSets] = {inst->action_set, XR_NULL_PATH};
+    XrActionsSyncInfo down = *info;
+    down.countActiveActionSets = info->countActiveActionSets + 1;
+    down.activeActionSets = sets.data();
+    return inst->next.sync_actions(session, &down);
+  });
+}
+
+// For apps without actions of their own: see Session::attached_alone.
+XRAPI_ATTR XrResult XRAPI_CALL layer_begin_frame(XrSession session, const XrFrameBeginInfo* info) {
+  return guarded("xrBeginFrame", [&] {
+    Instance* inst;
+    Session* state;
+    {
+      std::shared_lock lock(registry().mutex);
+      auto it = registry().sessions.find(session);
+      if (it == registry().sessions.end()) return XR_ERROR_HANDLE_INVALID;
+      inst = it->second->instance;
+      state = it->second.get();  // lives until xrDestroySession, which the app cannot call meanwhile
+    }
+    const XrResult r = inst->next.begin_frame(session, info);
+    if (XR_FAILED(r) || state->app_attached) return r;
+    if (!state->attached_alone && state->frames.fetch_add(1) + 1 == kAttachAloneAfterFrames) {
+      auto attach = xr_struct<XrSessionActionSetsAttachInfo>(XR_TYPE_SESSION_ACTION_SETS_ATTACH_INFO);
+      attach.countActionSets = 1;
+      attach.actionSets = &inst->action_set;
+      for (const auto& [profile, list] : inst->our_bindings) {
+        auto s = xr_struct<XrInteractionProfileSuggestedBinding>(XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING);
+        s.interactionProfile = profile;
+        s.countSuggestedBindings = static_cast<uint32_t>(list.size());
+        s.suggestedBindings = list.data();
+        (void)inst->next.suggest_bindings(inst->handle, &s);
+      }
+      if (const XrResult ar = inst->next.attach_action_sets(session, &attach); XR_SUCCEEDED(ar)) {
+        logger().info("Proprio layer: the app attached no action sets in its first {} frames; the layer's wrist "
+                      "actions are attached alone", kAttachAloneAfterFrames);
+        state->attached_alone = true;
+      } else {
+        logger().warn("Proprio layer: cannot attach the wrist actions alone ({})", static_cast<int>(ar));
+      }
+    }
+    if (state->attached_alone) {
+      XrActiveActionSet active{inst->action_set, XR_NULL_PATH};
+      auto sync = xr_struct<XrActionsSyncInfo>(XR_TYPE_ACTIONS_SYNC_INFO);
+      sync.countActiveActionSets = 1;
+      sync.activeActionSets = &active;
+      (void)inst->next.sync_actions(session, &sync);
+    }
+    return r;
+  });
+}
+
+// Tracker connection events go to the app only if it enabled the extension itself.
+XRAPI_ATTR XrResult XRAPI_CALL layer_poll_event(XrInstance instance, XrEventDataBuffer* event) {
+  return guarded("xrPollEvent", [&] {
+    Instance* inst = find_instance(instance);
+    if (!inst) return XR_ERROR_HANDLE_INVALID;
+    for (;;) {
+      const XrResult r = inst->next.poll_event(instance, event);
+      if (r != XR_SUCCESS || event->type != XR_TYPE_EVENT_DATA_VIVE_TRACKER_CONNECTED_HTCX) return r;
+      event->type = XR_TYPE_EVENT_DATA_BUFFER;  // swallowed; the next one, if any
+    }
+  });
+}
+
+bool RuntimeHeadProvider::locate(TrackedPose what, TimeNs t_ns, Pose& T_world_x) noexcept {
+  if (what != TrackedPose::head) return false;
+  const XrInstance handle = instance_.load(std::memory_order_acquire);
+  if (handle == XR_NULL_HANDLE) return false;
+  try {
+    std::shared_lock lock(registry().mutex);
+    const Instance* inst = find_instance_locked(handle);
+    if (!inst) return false;
+    // An instance has one session at a time in practice; take the first with a head.
+    for (const auto& [h, s] : registry().sessions) {
+      if (s->instance != inst || s->view_space == XR_NULL_HANDLE || config_index_ >= s->source_spaces.size() ||
+          s->source_spaces[config_index_] == XR_NULL_HANDLE) {
+        continue;
+      }
+      XrTime time = t_ns;
+      if (inst->next.convert_timespec_to_time) {
+        timespec ts{static_cast<time_t>(t_ns / kNsPerSecond), static_cast<long>(t_ns % kNsPerSecond)};
+        if (XR_FAILED(inst->next.convert_timespec_to_time(inst->handle, &ts, &time))) return false;
+      }
+      auto loc = xr_struct<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+      if (XR_FAILED(inst->next.locate_space(s->view_space, s->source_spaces[config_index_], time, &loc))) return false;
+      constexpr XrSpaceLocationFlags kBoth = XR_SPACE_LOCATION_ORIENTATION_VALID_BIT | XR_SPACE_LOCATION_POSITION_VALID_BIT;
+      if ((loc.locationFlags & kBoth) != kBoth) return false;
+      T_world_x = from_xr(loc.pose);
+      return true;
+    }
+  } catch (...) {
+  }
+  return false;
 }
 
 XRAPI_ATTR XrResult XRAPI_CALL layer_create_hand_tracker(XrSession session, const XrHandTrackerCreateInfoEXT* info,
@@ -297,11 +795,18 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_hand_tracker(XrSession session, cons
   return guarded("xrCreateHandTrackerEXT", [&] {
     auto& r = registry();
     Instance* inst;
+    XrSpace wrist_space = XR_NULL_HANDLE;
+    bool runtime_hand_wanted = false;
     {
       std::shared_lock lock(r.mutex);
       auto it = r.sessions.find(session);
       if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
-      inst = it->second;
+      inst = it->second->instance;
+      if (info && (info->hand == XR_HAND_LEFT_EXT || info->hand == XR_HAND_RIGHT_EXT)) {
+        const std::size_t h = info->hand == XR_HAND_LEFT_EXT ? 0 : 1;
+        wrist_space = it->second->wrist_spaces[h];
+        runtime_hand_wanted = inst->hands[h].source && inst->wrist[h].kind == WristSource::runtime_hand;
+      }
     }
     if (!info || info->type != XR_TYPE_HAND_TRACKER_CREATE_INFO_EXT || !tracker) return XR_ERROR_VALIDATION_FAILURE;
     if (info->hand != XR_HAND_LEFT_EXT && info->hand != XR_HAND_RIGHT_EXT) return XR_ERROR_VALIDATION_FAILURE;
@@ -326,6 +831,17 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_hand_tracker(XrSession session, cons
         }
       }
     }
+    t->wrist_space = wrist_space;
+    if (runtime_hand_wanted && inst->runtime_hands) {
+      // The runtime's own tracker for the same hand: its wrist, our fingers.
+      auto down_info = *info;
+      down_info.next = nullptr;
+      if (const XrResult hr = inst->next.create_hand_tracker(session, &down_info, &t->runtime_hand); XR_FAILED(hr)) {
+        logger().error("Proprio layer: the runtime refused its own {} hand tracker ({}); the hand is shown "
+                       "at the source's wrist", to_string(t->hand), static_cast<int>(hr));
+        t->runtime_hand = XR_NULL_HANDLE;
+      }
+    }
     if (t->binding.source) {
       auto space_info = xr_struct<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
       space_info.referenceSpaceType = to_xr(t->binding.config->space);
@@ -334,6 +850,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_hand_tracker(XrSession session, cons
       if (XR_FAILED(sr)) {
         logger().error("Proprio layer: cannot create the {} reference space for the {} hand source ({})",
                        to_string(t->binding.config->space), to_string(t->hand), static_cast<int>(sr));
+        release_tracker(*t);
         return sr;
       }
     }
@@ -370,6 +887,144 @@ void write_inactive(XrHandJointLocationsEXT* locations, XrHandJointVelocitiesEXT
     for (uint32_t i = 0; i < velocities->jointCount; ++i) velocities->jointVelocities[i].velocityFlags = 0;
   }
   if (data_source) data_source->isActive = XR_FALSE;
+}
+
+constexpr XrSpaceLocationFlags kBothValid = XR_SPACE_LOCATION_ORIENTATION_VALID_BIT | XR_SPACE_LOCATION_POSITION_VALID_BIT;
+constexpr XrSpaceLocationFlags kBothTracked = XR_SPACE_LOCATION_ORIENTATION_TRACKED_BIT | XR_SPACE_LOCATION_POSITION_TRACKED_BIT;
+constexpr XrSpaceVelocityFlags kBothVelocities = XR_SPACE_VELOCITY_LINEAR_VALID_BIT | XR_SPACE_VELOCITY_ANGULAR_VALID_BIT;
+
+// The source's frame in the app's base space at the requested time, and how
+// it moves: v_anchor is the velocity of the point anchor_p, w the angular
+// velocity (both in the base space).
+struct Frame {
+  Pose T_base_source;
+  bool tracked = false;
+  bool has_velocity = false;
+  Vec3 anchor_p = Vec3::Zero(), v_anchor = Vec3::Zero(), w = Vec3::Zero();
+};
+
+// The source's configured origin (a reference space with its offset).
+bool locate_source_origin(const Tracker& t, const XrHandJointsLocateInfoEXT& info, Frame& frame) {
+  auto space_velocity = xr_struct<XrSpaceVelocity>(XR_TYPE_SPACE_VELOCITY);
+  auto space_location = xr_struct<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+  space_location.next = &space_velocity;
+  if (XR_FAILED(t.instance->next.locate_space(t.source_space, info.baseSpace, info.time, &space_location))) return false;
+  if ((space_location.locationFlags & kBothValid) != kBothValid) return false;
+  frame.T_base_source = from_xr(space_location.pose);
+  frame.tracked = (space_location.locationFlags & kBothTracked) == kBothTracked;
+  frame.has_velocity = (space_velocity.velocityFlags & kBothVelocities) == kBothVelocities;
+  frame.anchor_p = frame.T_base_source.p;
+  frame.v_anchor = from_xr(space_velocity.linearVelocity);
+  frame.w = from_xr(space_velocity.angularVelocity);
+  return true;
+}
+
+// The runtime's wrist for this hand: a controller's or tracker's pose with
+// the calibrated offset, or the runtime's own hand tracking. Lost, the last
+// one is held (not tracked) for the stale timeout, in the same base space.
+bool locate_runtime_wrist(const Tracker& t, const XrHandJointsLocateInfoEXT& info, TimeNs t_ns, const HandPose& pose,
+                          Frame& frame) {
+  const Instance& inst = *t.instance;
+  const WristPlan& plan = inst.wrist[static_cast<std::size_t>(t.hand)];
+  bool valid = false;
+  Pose T_base_wrist;
+  if (plan.kind == WristSource::runtime_hand && t.runtime_hand != XR_NULL_HANDLE) {
+    std::array<XrHandJointLocationEXT, XR_HAND_JOINT_COUNT_EXT> joints{};
+    std::array<XrHandJointVelocityEXT, XR_HAND_JOINT_COUNT_EXT> joint_velocities{};
+    auto vels = xr_struct<XrHandJointVelocitiesEXT>(XR_TYPE_HAND_JOINT_VELOCITIES_EXT);
+    vels.jointCount = XR_HAND_JOINT_COUNT_EXT;
+    vels.jointVelocities = joint_velocities.data();
+    auto locs = xr_struct<XrHandJointLocationsEXT>(XR_TYPE_HAND_JOINT_LOCATIONS_EXT);
+    locs.next = &vels;
+    locs.jointCount = XR_HAND_JOINT_COUNT_EXT;
+    locs.jointLocations = joints.data();
+    auto down = xr_struct<XrHandJointsLocateInfoEXT>(XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT);
+    down.baseSpace = info.baseSpace;
+    down.time = info.time;
+    const XrHandJointLocationEXT& wj = joints[XR_HAND_JOINT_WRIST_EXT];
+    if (XR_SUCCEEDED(inst.next.locate_hand_joints(t.runtime_hand, &down, &locs)) && locs.isActive &&
+        (wj.locationFlags & kBothValid) == kBothValid) {
+      valid = true;
+      T_base_wrist = from_xr(wj.pose);
+      frame.tracked = (wj.locationFlags & kBothTracked) == kBothTracked;
+      const XrHandJointVelocityEXT& wv = joint_velocities[XR_HAND_JOINT_WRIST_EXT];
+      frame.has_velocity = (wv.velocityFlags & kBothVelocities) == kBothVelocities;
+      frame.v_anchor = from_xr(wv.linearVelocity);
+      frame.w = from_xr(wv.angularVelocity);
+    }
+  } else if (t.wrist_space != XR_NULL_HANDLE) {
+    auto space_velocity = xr_struct<XrSpaceVelocity>(XR_TYPE_SPACE_VELOCITY);
+    auto space_location = xr_struct<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+    space_location.next = &space_velocity;
+    if (XR_SUCCEEDED(inst.next.locate_space(t.wrist_space, info.baseSpace, info.time, &space_location)) &&
+        (space_location.locationFlags & kBothValid) == kBothValid) {
+      valid = true;
+      const Pose T_base_device = from_xr(space_location.pose);
+      T_base_wrist = T_base_device * plan.T_device_wrist;
+      frame.tracked = (space_location.locationFlags & kBothTracked) == kBothTracked;
+      frame.has_velocity = (space_velocity.velocityFlags & kBothVelocities) == kBothVelocities;
+      frame.w = from_xr(space_velocity.angularVelocity);
+      frame.v_anchor = from_xr(space_velocity.linearVelocity) + frame.w.cross(T_base_wrist.p - T_base_device.p);
+    }
+  }
+  {
+    std::lock_guard lock(t.wrist_mutex);
+    if (valid) {
+      t.last_T_base_wrist = T_base_wrist;
+      t.last_wrist_base = info.baseSpace;
+      t.last_wrist_ns = t_ns;
+    } else if (t.last_wrist_base == info.baseSpace && t.last_wrist_ns != 0 &&
+               t_ns - t.last_wrist_ns <= inst.config.stale_timeout_ns) {
+      valid = true;
+      T_base_wrist = t.last_T_base_wrist;
+      frame.tracked = false;
+      frame.has_velocity = false;
+    }
+  }
+  if (!valid) return false;
+  // The source's frame is wherever it must be for its wrist to sit on the runtime's.
+  frame.T_base_source = T_base_wrist * pose.joint(HandJoint::wrist).inverse();
+  frame.anchor_p = T_base_wrist.p;
+  return true;
+}
+
+void add_to_histogram(std::array<std::atomic<std::uint64_t>, XR_PROPRIO_LATENCY_BIN_COUNT>& bins,
+                      std::atomic<std::int64_t>& max_ns, std::int64_t ns) {
+  constexpr std::int64_t kBinNs = kNsPerMillisecond / 2;
+  const std::int64_t bin = std::clamp<std::int64_t>(ns / kBinNs, 0, XR_PROPRIO_LATENCY_BIN_COUNT - 1);
+  bins[static_cast<std::size_t>(bin)].fetch_add(1, std::memory_order_relaxed);
+  std::int64_t seen = max_ns.load(std::memory_order_relaxed);
+  while (ns > seen && !max_ns.compare_exchange_weak(seen, ns, std::memory_order_relaxed)) {
+  }
+}
+
+void record_latency(const Tracker& t, const HandPose& pose, TimeNs now_ns) {
+  t.pose_count.fetch_add(1, std::memory_order_relaxed);
+  add_to_histogram(t.age_at_locate, t.max_age_ns, now_ns - pose.data_time_ns);
+  if (pose.ready_time_ns > 0) {
+    add_to_histogram(t.sample_to_ready, t.max_sample_to_ready_ns, pose.ready_time_ns - pose.data_time_ns);
+  }
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_get_latency(XrHandTrackerEXT tracker, XrHandTrackingLatencyPROPRIO* out) {
+  return guarded("xrGetHandTrackingLatencyPROPRIO", [&] {
+    std::shared_lock lock(registry().mutex);
+    const auto it = registry().trackers.find(tracker);
+    if (it == registry().trackers.end()) return XR_ERROR_HANDLE_INVALID;
+    if (!it->second->instance->latency) return XR_ERROR_FUNCTION_UNSUPPORTED;
+    if (!out || out->type != XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO) return XR_ERROR_VALIDATION_FAILURE;
+    const Tracker& t = *it->second;
+    out->binCount = XR_PROPRIO_LATENCY_BIN_COUNT;
+    out->binWidthMs = 0.5f;
+    out->poseCount = t.pose_count.load(std::memory_order_relaxed);
+    out->maxSampleToReadyMs = static_cast<float>(t.max_sample_to_ready_ns.load(std::memory_order_relaxed) * 1e-6);
+    out->maxAgeAtLocateMs = static_cast<float>(t.max_age_ns.load(std::memory_order_relaxed) * 1e-6);
+    for (std::size_t i = 0; i < XR_PROPRIO_LATENCY_BIN_COUNT; ++i) {
+      out->sampleToReady[i] = t.sample_to_ready[i].load(std::memory_order_relaxed);
+      out->ageAtLocate[i] = t.age_at_locate[i].load(std::memory_order_relaxed);
+    }
+    return XR_SUCCESS;
+  });
 }
 
 XRAPI_ATTR XrResult XRAPI_CALL layer_locate_hand_joints(XrHandTrackerEXT tracker, const XrHandJointsLocateInfoEXT* info,
@@ -410,19 +1065,6 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_locate_hand_joints(XrHandTrackerEXT tracker
       return XR_SUCCESS;
     }
 
-    // Where the source origin is in the app's base space at that time.
-    auto space_velocity = xr_struct<XrSpaceVelocity>(XR_TYPE_SPACE_VELOCITY);
-    auto space_location = xr_struct<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
-    space_location.next = &space_velocity;
-    const XrResult lr = inst.next.locate_space(t.source_space, info->baseSpace, info->time, &space_location);
-    if (XR_FAILED(lr)) return lr;
-    constexpr XrSpaceLocationFlags kBothValid = XR_SPACE_LOCATION_ORIENTATION_VALID_BIT | XR_SPACE_LOCATION_POSITION_VALID_BIT;
-    constexpr XrSpaceLocationFlags kBothTracked = XR_SPACE_LOCATION_ORIENTATION_TRACKED_BIT | XR_SPACE_LOCATION_POSITION_TRACKED_BIT;
-    if ((space_location.locationFlags & kBothValid) != kBothValid) {
-      write_inactive(locations, velocities, data_source);
-      return XR_SUCCESS;
-    }
-
     // XrTime -> CLOCK_MONOTONIC, the time base of every Proprio sample.
     TimeNs t_ns = info->time;
     if (inst.next.convert_time_to_timespec) {
@@ -441,31 +1083,49 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_locate_hand_joints(XrHandTrackerEXT tracker
       return XR_SUCCESS;
     }
 
-    const Pose T_base_source = from_xr(space_location.pose);
-    const bool space_tracked = (space_location.locationFlags & kBothTracked) == kBothTracked;
-    const XrSpaceLocationFlags joint_flags = kBothValid | (fresh && space_tracked ? kBothTracked : 0);
+    // Where the source's frame is in the app's base space: its configured
+    // origin, or wherever the runtime's wrist puts the source's wrist.
+    // Without the means (the runtime lacks the extension, refused the
+    // actions or the hand tracker), the source's own wrist: logged at start.
+    Frame frame;
+    const bool runtime_wrist = inst.wrist[static_cast<std::size_t>(t.hand)].kind != WristSource::source &&
+                               (t.wrist_space != XR_NULL_HANDLE || t.runtime_hand != XR_NULL_HANDLE);
+    const bool located = runtime_wrist ? locate_runtime_wrist(t, *info, t_ns, pose, frame)
+                                       : locate_source_origin(t, *info, frame);
+    if (!located) {
+      write_inactive(locations, velocities, data_source);
+      return XR_SUCCESS;
+    }
+
+    const XrSpaceLocationFlags joint_flags = kBothValid | (fresh && frame.tracked ? kBothTracked : 0);
     locations->isActive = XR_TRUE;
     for (std::size_t i = 0; i < kHandJointCount; ++i) {
       XrHandJointLocationEXT& out = locations->jointLocations[i];
-      out.pose = proprio::to_xr(T_base_source * pose.T_world_joint[i]);
+      out.pose = proprio::to_xr(frame.T_base_source * pose.T_world_joint[i]);
       out.radius = static_cast<float>(std::max(pose.radius_m[i], 1e-3));  // positive whenever valid
       out.locationFlags = joint_flags;
     }
     if (velocities) {
-      constexpr XrSpaceVelocityFlags kBothVelocities = XR_SPACE_VELOCITY_LINEAR_VALID_BIT | XR_SPACE_VELOCITY_ANGULAR_VALID_BIT;
-      const bool known = fresh && pose.has_velocity && (space_velocity.velocityFlags & kBothVelocities) == kBothVelocities;
-      const Vec3 v_space = from_xr(space_velocity.linearVelocity);
-      const Vec3 w_space = from_xr(space_velocity.angularVelocity);
+      const bool known = fresh && pose.has_velocity && frame.has_velocity;
+      // With the runtime's wrist, the source's own wrist motion is replaced:
+      // only the joints' motion relative to it is kept.
+      const bool rebased = runtime_wrist;
+      const std::size_t w = index_of(HandJoint::wrist);
+      const Vec3 p_ws = pose.T_world_joint[w].p;
+      const Vec3 v_ws = rebased ? pose.linear_velocity_in_world[w] : Vec3(Vec3::Zero());
+      const Vec3 w_ws = rebased ? pose.angular_velocity_in_world[w] : Vec3(Vec3::Zero());
       for (std::size_t i = 0; i < kHandJointCount; ++i) {
         XrHandJointVelocityEXT& out = velocities->jointVelocities[i];
         if (!known) {
           out.velocityFlags = 0;
           continue;
         }
-        // A point fixed in a moving frame moves with it: v = v_o + w x r + R v_rel.
-        const Vec3 r = from_xr(locations->jointLocations[i].pose.position) - T_base_source.p;
-        out.linearVelocity = proprio::to_xr(Vec3(v_space + w_space.cross(r) + T_base_source.q * pose.linear_velocity_in_world[i]));
-        out.angularVelocity = proprio::to_xr(Vec3(w_space + T_base_source.q * pose.angular_velocity_in_world[i]));
+        const Vec3 v_rel = pose.linear_velocity_in_world[i] - v_ws - w_ws.cross(pose.T_world_joint[i].p - p_ws);
+        const Vec3 w_rel = pose.angular_velocity_in_world[i] - w_ws;
+        // A point carried by a moving frame: v = v_anchor + w x (p - anchor) + R v_rel.
+        const Vec3 r = from_xr(locations->jointLocations[i].pose.position) - frame.anchor_p;
+        out.linearVelocity = proprio::to_xr(Vec3(frame.v_anchor + frame.w.cross(r) + frame.T_base_source.q * v_rel));
+        out.angularVelocity = proprio::to_xr(Vec3(frame.w + frame.T_base_source.q * w_rel));
         out.velocityFlags = kBothVelocities;
       }
     }
@@ -473,6 +1133,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_locate_hand_joints(XrHandTrackerEXT tracker
       data_source->isActive = XR_TRUE;
       data_source->dataSource = XR_HAND_TRACKING_DATA_SOURCE_UNOBSTRUCTED_EXT;
     }
+    if (pose.data_time_ns > 0) record_latency(t, pose, MonotonicClock::instance().now_ns());
     return XR_SUCCESS;
   });
 }
@@ -482,7 +1143,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
   return guarded("xrGetInstanceProcAddr", [&] {
     if (!name || !function) return XR_ERROR_VALIDATION_FAILURE;
     PFN_xrGetInstanceProcAddr next = nullptr;
-    bool hook_hands = false, hook_system = false;
+    bool hook_hands = false, hook_system = false, hook_actions = false, hook_events = false, latency = false;
     {
       std::shared_lock lock(registry().mutex);
       const Instance* inst = find_instance_locked(instance);
@@ -493,6 +1154,9 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
       next = inst->next.get_instance_proc_addr;
       hook_system = inst->hand_tracking && inst->serving;
       hook_hands = hook_system;
+      hook_actions = hook_system && inst->wants_actions();
+      hook_events = hook_system && inst->vive_tracker && !inst->app_vive_tracker;
+      latency = hook_system && inst->latency;
     }
     const std::string_view n(name);
     auto ours = [&](auto fn) {
@@ -512,11 +1176,25 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
       if (n == "xrDestroyHandTrackerEXT") return ours(&layer_destroy_hand_tracker);
       if (n == "xrLocateHandJointsEXT") return ours(&layer_locate_hand_joints);
     }
+    if (hook_actions) {
+      if (n == "xrSuggestInteractionProfileBindings") return ours(&layer_suggest_bindings);
+      if (n == "xrAttachSessionActionSets") return ours(&layer_attach_action_sets);
+      if (n == "xrSyncActions") return ours(&layer_sync_actions);
+      if (n == "xrBeginFrame") return ours(&layer_begin_frame);
+    }
+    if (hook_events && n == "xrPollEvent") return ours(&layer_poll_event);
+    if (n == "xrGetHandTrackingLatencyPROPRIO") {
+      if (!latency) {
+        *function = nullptr;
+        return XR_ERROR_FUNCTION_UNSUPPORTED;
+      }
+      return ours(&layer_get_latency);
+    }
     return next(instance, name, function);
   });
 }
 
-bool is_ours(std::string_view ext) {
+bool is_ours(std::string_view ext) noexcept {
   for (auto e : kOurExtensions) {
     if (ext == e) return true;
   }
@@ -557,6 +1235,8 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
       inst->hand_tracking |= e == XR_EXT_HAND_TRACKING_EXTENSION_NAME;
       inst->motion_range |= e == XR_EXT_HAND_JOINTS_MOTION_RANGE_EXTENSION_NAME;
       inst->data_source |= e == XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME;
+      inst->latency |= e == XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME;
+      inst->app_vive_tracker |= e == XR_HTCX_VIVE_TRACKER_INTERACTION_EXTENSION_NAME;
       app_convert_timespec |= e == XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME;
     }
     if (inst->hand_tracking) start_sources(*inst);
@@ -565,13 +1245,23 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
                                             (mode == RuntimeHandTracking::automatic && !inst->sources.empty()));
 
     // What the rest of the chain sees: without our extensions when we serve
-    // them, plus the time conversion we need.
-    auto build = [&](bool strip_ours, bool add_timespec) {
+    // them (XR_PROPRIO_* never goes down), plus what we need ourselves: the
+    // time conversion, and for a runtime wrist the tracker extension or the
+    // runtime's own hand tracking (each dropped again if the runtime lacks it).
+    struct Extras {
+      bool tracker = false;  // add XR_HTCX_vive_tracker_interaction
+      bool hands = false;    // keep XR_EXT_hand_tracking
+    };
+    auto build = [&](bool strip_ours, bool add_timespec, Extras x = {}) {
       std::vector<const char*> names;
       for (uint32_t i = 0; i < info->enabledExtensionCount; ++i) {
-        if (!(strip_ours && is_ours(info->enabledExtensionNames[i]))) names.push_back(info->enabledExtensionNames[i]);
+        const std::string_view e(info->enabledExtensionNames[i]);
+        if (e == XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME) continue;
+        if (strip_ours && is_ours(e) && !(x.hands && e == XR_EXT_HAND_TRACKING_EXTENSION_NAME)) continue;
+        names.push_back(info->enabledExtensionNames[i]);
       }
       if (add_timespec) names.push_back(XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME);
+      if (x.tracker) names.push_back(XR_HTCX_VIVE_TRACKER_INTERACTION_EXTENSION_NAME);
       return names;
     };
     XrApiLayerCreateInfo down_layer_info = *layer_info;
@@ -584,7 +1274,22 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
     };
 
     bool timespec = app_convert_timespec || inst->serving;
-    XrResult r = create(build(inst->serving, timespec && !app_convert_timespec));
+    Extras extras;
+    extras.tracker = inst->serving && !inst->app_vive_tracker && any_wrist(*inst, WristSource::tracker);
+    extras.hands = inst->serving && any_wrist(*inst, WristSource::runtime_hand);
+    XrResult r = create(build(inst->serving, timespec && !app_convert_timespec, extras));
+    const Extras wanted = extras;
+    if (r == XR_ERROR_EXTENSION_NOT_PRESENT && (wanted.tracker || wanted.hands)) {
+      const Extras fallbacks[] = {{false, wanted.hands}, {wanted.tracker, false}, {false, false}};
+      for (const Extras& x : fallbacks) {
+        if (x.tracker == wanted.tracker && x.hands == wanted.hands) continue;  // the one that failed
+        extras = x;
+        r = create(build(inst->serving, timespec && !app_convert_timespec, extras));
+        if (r != XR_ERROR_EXTENSION_NOT_PRESENT) break;
+      }
+    }
+    inst->vive_tracker = inst->app_vive_tracker || extras.tracker;
+    inst->runtime_hands = extras.hands;
     if (r == XR_ERROR_EXTENSION_NOT_PRESENT && inst->hand_tracking && !inst->serving) {
       // The runtime may track hands without the two companion extensions.
       std::vector<const char*> names;
@@ -606,6 +1311,14 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
       r = create(build(inst->serving, false));
     }
     if (XR_FAILED(r)) return r;
+    if (wanted.tracker && !extras.tracker) {
+      logger().error("Proprio layer: the runtime lacks {}: a wrist = \"tracker\" source gets no tracker wrist",
+                     XR_HTCX_VIVE_TRACKER_INTERACTION_EXTENSION_NAME);
+    }
+    if (wanted.hands && !extras.hands) {
+      logger().error("Proprio layer: the runtime has no hand tracking of its own: a wrist = \"runtime_hand\" "
+                     "source gets no wrist from it");
+    }
 
     inst->handle = *instance;
     const PFN_xrGetInstanceProcAddr gipa = next_info->nextGetInstanceProcAddr;
@@ -620,6 +1333,36 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
     d.locate_space = resolve<PFN_xrLocateSpace>(gipa, *instance, "xrLocateSpace");
     if (timespec) {
       d.convert_time_to_timespec = resolve<PFN_xrConvertTimeToTimespecTimeKHR>(gipa, *instance, "xrConvertTimeToTimespecTimeKHR");
+      d.convert_timespec_to_time = resolve<PFN_xrConvertTimespecTimeToTimeKHR>(gipa, *instance, "xrConvertTimespecTimeToTimeKHR");
+    }
+    if (inst->runtime_hands) {
+      d.create_hand_tracker = resolve<PFN_xrCreateHandTrackerEXT>(gipa, *instance, "xrCreateHandTrackerEXT");
+      d.destroy_hand_tracker = resolve<PFN_xrDestroyHandTrackerEXT>(gipa, *instance, "xrDestroyHandTrackerEXT");
+      d.locate_hand_joints = resolve<PFN_xrLocateHandJointsEXT>(gipa, *instance, "xrLocateHandJointsEXT");
+      if (!d.create_hand_tracker || !d.destroy_hand_tracker || !d.locate_hand_joints) {
+        logger().error("Proprio layer: the runtime lists hand tracking but lacks its functions: no runtime_hand wrist");
+        inst->runtime_hands = false;
+      }
+    }
+    d.poll_event = resolve<PFN_xrPollEvent>(gipa, *instance, "xrPollEvent");
+    if (inst->serving && (any_wrist(*inst, WristSource::controller) || any_wrist(*inst, WristSource::tracker))) {
+      d.string_to_path = resolve<PFN_xrStringToPath>(gipa, *instance, "xrStringToPath");
+      d.create_action_set = resolve<PFN_xrCreateActionSet>(gipa, *instance, "xrCreateActionSet");
+      d.create_action = resolve<PFN_xrCreateAction>(gipa, *instance, "xrCreateAction");
+      d.suggest_bindings = resolve<PFN_xrSuggestInteractionProfileBindings>(gipa, *instance, "xrSuggestInteractionProfileBindings");
+      d.attach_action_sets = resolve<PFN_xrAttachSessionActionSets>(gipa, *instance, "xrAttachSessionActionSets");
+      d.sync_actions = resolve<PFN_xrSyncActions>(gipa, *instance, "xrSyncActions");
+      d.create_action_space = resolve<PFN_xrCreateActionSpace>(gipa, *instance, "xrCreateActionSpace");
+      d.begin_frame = resolve<PFN_xrBeginFrame>(gipa, *instance, "xrBeginFrame");
+      inst->handle = *instance;
+      if (!d.string_to_path || !d.create_action_set || !d.create_action || !d.suggest_bindings ||
+          !d.attach_action_sets || !d.sync_actions || !d.create_action_space || !d.begin_frame) {
+        logger().error("Proprio layer: the runtime lacks the action functions: no controller or tracker wrist");
+      } else if (auto st = create_wrist_actions(*inst); !st) {
+        logger().error("Proprio layer: no controller or tracker wrist: {}", st.error().message);
+        inst->action_set = XR_NULL_HANDLE;  // the runtime frees what was made with the instance
+        inst->grip_action = inst->tracker_action = XR_NULL_HANDLE;
+      }
     }
     if (!d.destroy_instance || !d.get_system_properties || !d.create_session || !d.destroy_session ||
         !d.create_reference_space || !d.destroy_space || !d.locate_space) {
@@ -632,8 +1375,12 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
     } else if (inst->hand_tracking) {
       logger().info("Proprio layer: passing the runtime's own hand tracking through");
     }
-    std::unique_lock lock(registry().mutex);
-    registry().instances[*instance] = std::move(inst);
+    Instance* raw = inst.get();
+    {
+      std::unique_lock lock(registry().mutex);
+      registry().instances[*instance] = std::move(inst);
+    }
+    for (auto& provider : raw->head_providers) provider->bind(*instance);
     return XR_SUCCESS;
   });
 }

@@ -3,7 +3,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <algorithm>
 #include <set>
+#include <utility>
 
 #include "proprio/core/config.hpp"
 #include "proprio/core/file_io.hpp"
@@ -38,6 +40,16 @@ std::string_view to_string(RuntimeHandTracking m) noexcept {
   return "?";
 }
 
+std::string_view to_string(WristSource w) noexcept {
+  switch (w) {
+    case WristSource::source: return "source";
+    case WristSource::controller: return "controller";
+    case WristSource::tracker: return "tracker";
+    case WristSource::runtime_hand: return "runtime_hand";
+  }
+  return "?";
+}
+
 std::string SourceConfig::describe() const {
   std::string hand_list;
   for (auto h : hands) hand_list += (hand_list.empty() ? "" : "+") + std::string(proprio::to_string(h));
@@ -51,6 +63,13 @@ std::string SourceConfig::describe() const {
   if (type == SourceType::glove) {
     std::snprintf(buf, sizeof buf, "; input %s, subject %d, seed %llu, model %s", input.c_str(), subject,
                   static_cast<unsigned long long>(seed), model.empty() ? "(shipped)" : model.c_str());
+  } else if (type == SourceType::vist && input == "device") {
+    std::snprintf(buf, sizeof buf, "; input device, camera %s%s%s, glove %s", camera.c_str(),
+                  camera_right.empty() ? "" : " + ", camera_right.c_str(),
+                  glove_description.empty() ? "(thesis glove)" : glove_description.c_str());
+  } else if (type == SourceType::vist && input == "emulated") {
+    std::snprintf(buf, sizeof buf, "; input emulated, subject %d, seed %llu", subject,
+                  static_cast<unsigned long long>(seed));
   } else if (type == SourceType::sim) {
     std::snprintf(buf, sizeof buf, "; protocol %s, subject %d, seed %llu, %.1f Hz",
                   std::string(sim::to_string(protocol)).c_str(), subject, static_cast<unsigned long long>(seed),
@@ -58,7 +77,22 @@ std::string SourceConfig::describe() const {
   } else {
     std::snprintf(buf, sizeof buf, "; file %s%s", path.c_str(), loop ? ", looped" : "");
   }
-  return s + buf;
+  s += buf;
+  if (wrist != WristSource::source) {
+    const Vec3 wr = so3_log(T_device_wrist.q);
+    std::snprintf(buf, sizeof buf, "; wrist from the runtime's %s%s%s", std::string(to_string(wrist)).c_str(),
+                  wrist == WristSource::runtime_hand ? "" : ", device-to-wrist ",
+                  wrist == WristSource::runtime_hand ? ""
+                  : !wrist_calibration.empty()       ? wrist_calibration.c_str()
+                                                     : "");
+    s += buf;
+    if (wrist != WristSource::runtime_hand && wrist_calibration.empty()) {
+      std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f) m, (%.1f, %.1f, %.1f) deg", T_device_wrist.p.x(),
+                    T_device_wrist.p.y(), T_device_wrist.p.z(), wr.x() * 57.2958, wr.y() * 57.2958, wr.z() * 57.2958);
+      s += buf;
+    }
+  }
+  return s;
 }
 
 std::string LayerConfig::describe() const {
@@ -107,7 +141,7 @@ Result<Vec3> vec3(const Config& c, std::string_view key, double limit) {
                       c.where(key) + ": '" + std::string(key) + "' needs 3 numbers, got " + std::to_string(v->size()));
   }
   for (double x : *v) {
-    if (std::fabs(x) > limit) {
+    if (!std::isfinite(x) || std::fabs(x) > limit) {
       return make_error(Errc::invalid_argument, c.where(key) + ": '" + std::string(key) + "' has " +
                                                     std::to_string(x) + "; each component must be within +-" +
                                                     std::to_string(static_cast<int>(limit)));
@@ -119,16 +153,151 @@ Result<Vec3> vec3(const Config& c, std::string_view key, double limit) {
 // The keys each kind of [[source]] reads; anything else is a typo that
 // would otherwise be ignored silently.
 std::set<std::string> source_keys(SourceType type) {
-  std::set<std::string> k{"type", "space", "hands", "offset_position_m", "offset_rotation_deg"};
+  std::set<std::string> k{"type",  "space", "hands", "offset_position_m", "offset_rotation_deg",
+                          "wrist", "wrist_offset_position_m", "wrist_offset_rotation_deg", "wrist_calibration",
+                          "tracker_role_left", "tracker_role_right"};
   switch (type) {
     case SourceType::glove:
-      k.insert({"input", "calibration", "hand_length_m", "hand_width_m", "subject", "seed", "model", "layout"});
+      k.insert({"input", "calibration", "hand_length_m", "hand_width_m", "subject", "seed", "model", "layout",
+                "truth_path"});
       break;
     case SourceType::sim: k.insert({"protocol", "subject", "seed", "rate_hz"}); break;
-    case SourceType::replay:
-    case SourceType::vist: k.insert({"path", "loop"}); break;
+    case SourceType::replay: k.insert({"path", "loop"}); break;
+    case SourceType::vist:
+      k.insert({"input", "path", "loop", "camera", "camera_right", "stereo_calibration", "glove", "imu_path",
+                "imu_serial", "subject", "seed", "truth_path"});
+      break;
   }
   return k;
+}
+
+// A tracker role is one path segment of XR_HTCX_vive_tracker_interaction.
+Status check_role(const Config& c, std::string_view key, const std::string& role) {
+  const bool ok = !role.empty() && role.size() <= 32 &&
+                  role.find_first_not_of("abcdefghijklmnopqrstuvwxyz_0123456789") == std::string::npos;
+  if (ok) return {};
+  return make_error(Errc::invalid_argument, c.where(key) + ": '" + std::string(key) + "' = \"" + printable(role, 40) +
+                                                "\" is not a tracker role (lower-case letters, digits and '_', "
+                                                "e.g. \"left_wrist\")");
+}
+
+Status parse_wrist(const Config& c, SourceConfig& s) {
+  auto wrist = choose<WristSource>(c, "wrist", "source",
+                                   {{"source", WristSource::source},
+                                    {"controller", WristSource::controller},
+                                    {"tracker", WristSource::tracker},
+                                    {"runtime_hand", WristSource::runtime_hand}});
+  if (!wrist) return wrist.error();
+  s.wrist = *wrist;
+  const bool device = s.wrist == WristSource::controller || s.wrist == WristSource::tracker;
+  for (const char* key : {"wrist_offset_position_m", "wrist_offset_rotation_deg", "wrist_calibration"}) {
+    if (c.contains(key) && !device) {
+      return make_error(Errc::invalid_argument, c.where(key) + ": '" + std::string(key) +
+                                                    "' applies only to wrist = \"controller\" or \"tracker\"");
+    }
+  }
+  if (s.wrist != WristSource::tracker) {
+    for (const char* key : {"tracker_role_left", "tracker_role_right"}) {
+      if (c.contains(key)) {
+        return make_error(Errc::invalid_argument,
+                          c.where(key) + ": '" + std::string(key) + "' applies only to wrist = \"tracker\"");
+      }
+    }
+  }
+  if (!device) return {};
+  if (s.wrist == WristSource::tracker) {
+    const char* keys[2] = {"tracker_role_left", "tracker_role_right"};
+    for (int h = 0; h < 2; ++h) {
+      auto role = c.get_string_or(keys[h], s.tracker_role[h]);
+      if (!role) return role.error();
+      if (auto st = check_role(c, keys[h], *role); !st) return st;
+      s.tracker_role[h] = *role;
+    }
+  }
+  if (c.contains("wrist_calibration") &&
+      (c.contains("wrist_offset_position_m") || c.contains("wrist_offset_rotation_deg"))) {
+    return make_error(Errc::invalid_argument, c.where("wrist_calibration") +
+                                                  ": give either 'wrist_calibration' or the inline wrist offset, "
+                                                  "not both");
+  }
+  auto cal = c.get_string_or("wrist_calibration", "");
+  if (!cal) return cal.error();
+  s.wrist_calibration = *cal;
+  if (!s.wrist_calibration.empty()) return {};  // loaded when the layer starts the source
+  // Without a calibration: the wrist 8 cm behind a controller's grip point
+  // (a hand holding it), on a wrist tracker's own origin. Rough: calibrate.
+  const Vec3 fallback = s.wrist == WristSource::controller ? Vec3(0.0, 0.0, 0.08) : Vec3(Vec3::Zero());
+  auto p = vec3(c, "wrist_offset_position_m", 1.0);
+  if (!p) return p.error();
+  auto r = vec3(c, "wrist_offset_rotation_deg", 360.0);
+  if (!r) return r.error();
+  s.T_device_wrist = {so3_exp(*r * (M_PI / 180.0)), c.contains("wrist_offset_position_m") ? *p : fallback};
+  return {};
+}
+
+// The keys each vist input reads (the rest of source_keys(vist) is refused
+// with the input that would read it named).
+Status parse_vist(const Config& c, SourceConfig& s) {
+  auto input = choose<std::string>(c, "input", "replay",
+                                   {{"replay", std::string("replay")},
+                                    {"device", std::string("device")},
+                                    {"emulated", std::string("emulated")}});
+  if (!input) return input.error();
+  s.input = *input;
+  const std::set<std::string> replay{"path", "loop"};
+  const std::set<std::string> device{"camera", "camera_right", "stereo_calibration", "imu_path", "imu_serial"};
+  const std::set<std::string> emulated{"subject", "seed", "truth_path"};
+  const std::set<std::string>& mine = s.input == "replay" ? replay : s.input == "device" ? device : emulated;
+  for (const auto* group : {&replay, &device, &emulated}) {
+    if (group == &mine) continue;
+    for (const auto& key : *group) {
+      if (c.contains(key) && !mine.count(key)) {
+        return make_error(Errc::invalid_argument, c.where(key) + ": '" + key + "' does not apply to input = \"" +
+                                                      s.input + "\"");
+      }
+    }
+  }
+  if (s.space == ReferenceSpace::view && s.input != "replay") {
+    return make_error(Errc::invalid_argument,
+                      c.source_name() + ": a live vist source tracks in a world that stays still while the head "
+                                        "moves: set space = \"local\" or \"stage\", not \"view\"");
+  }
+  if (s.input == "replay" && c.contains("glove")) {  // the recording names its glove; this one would go unused
+    return make_error(Errc::invalid_argument, c.where("glove") +
+                                                  ": 'glove' does not apply to input = \"replay\" (the recording "
+                                                  "holds the glove it was made with)");
+  }
+  auto glove = c.get_string_or("glove", "");
+  if (!glove) return glove.error();
+  s.glove_description = *glove;
+  if (s.input == "replay") {
+    auto path = c.get_string("path");
+    if (!path) return path.error().with_context("a vist source with input \"replay\" needs a VIST session recording's path");
+    s.path = *path;
+    auto loop = c.get_bool_or("loop", true);
+    if (!loop) return loop.error();
+    s.loop = *loop;
+  } else if (s.input == "device") {
+    for (auto [key, field] : {std::pair{"camera", &s.camera}, std::pair{"camera_right", &s.camera_right},
+                              std::pair{"stereo_calibration", &s.stereo_calibration},
+                              std::pair{"imu_path", &s.imu_path}, std::pair{"imu_serial", &s.imu_serial}}) {
+      auto v = c.get_string_or(key, *field);
+      if (!v) return v.error();
+      *field = *v;
+    }
+    if (s.camera.empty()) return make_error(Errc::invalid_argument, c.where("camera") + ": 'camera' is empty");
+  } else {
+    auto subject = c.get_int_or("subject", 3, 0, 14);
+    if (!subject) return subject.error();
+    s.subject = static_cast<int>(*subject);
+    auto seed = c.get_int_or("seed", 1, 0, INT64_MAX);
+    if (!seed) return seed.error();
+    s.seed = static_cast<std::uint64_t>(*seed);
+  }
+  auto truth = c.get_string_or("truth_path", "");
+  if (!truth) return truth.error();
+  s.truth_path = *truth;
+  return {};
 }
 
 Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
@@ -167,12 +336,21 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
   auto r = vec3(c, "offset_rotation_deg", 360.0);
   if (!r) return r.error().with_context(where);
   s.T_space_source = {so3_exp(*r * (M_PI / 180.0)), *p};
+  if (auto w = parse_wrist(c, s); !w) return w.error().with_context(where);
 
   if (s.type == SourceType::glove) {
-    auto input =
-        choose<std::string>(c, "input", "sim", {{"sim", std::string("sim")}, {"device", std::string("device")}});
+    auto input = choose<std::string>(
+        c, "input", "sim",
+        {{"sim", std::string("sim")}, {"emulated", std::string("emulated")}, {"device", std::string("device")}});
     if (!input) return input.error().with_context(where);
     s.input = *input;
+    if (c.contains("truth_path") && s.input != "emulated") {
+      return make_error(Errc::invalid_argument,
+                        c.where("truth_path") + ": 'truth_path' applies only to input = \"emulated\"");
+    }
+    auto truth = c.get_string_or("truth_path", "");
+    if (!truth) return truth.error().with_context(where);
+    s.truth_path = *truth;
     if (s.input == "device") {
       auto cal = c.get_string("calibration");
       if (!cal) {
@@ -218,18 +396,16 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
     auto rate = c.get_double_or("rate_hz", 90.0, 1.0, 1000.0);
     if (!rate) return rate.error().with_context(where);
     s.rate_hz = *rate;
+  } else if (s.type == SourceType::vist) {
+    if (auto st = parse_vist(c, s); !st) return st.error().with_context(where);
+    if (!c.contains("hands")) s.hands = {Handedness::right};
   } else {
     auto path = c.get_string("path");
-    if (!path) {
-      return path.error().with_context(where + (s.type == SourceType::vist
-                                                    ? " (a vist source needs a VIST session recording's path)"
-                                                    : " (a replay source needs the recording's path)"));
-    }
+    if (!path) return path.error().with_context(where + " (a replay source needs the recording's path)");
     s.path = *path;
     auto loop = c.get_bool_or("loop", true);
     if (!loop) return loop.error().with_context(where);
     s.loop = *loop;
-    if (s.type == SourceType::vist && !c.contains("hands")) s.hands = {Handedness::right};
   }
   return s;
 }
@@ -279,6 +455,38 @@ Result<LayerConfig> load_layer_config(const std::filesystem::path& path) {
   auto text = read_input_file(path, "layer config", kMaxLayerConfigBytes);
   if (!text) return text.error();
   return parse_layer_config(*text, path.string());
+}
+
+Result<Pose> load_wrist_calibration(const std::filesystem::path& path) {
+  auto text = read_input_file(path, "wrist calibration", 64 * 1024);
+  if (!text) return text.error();
+  auto c = Config::parse(*text, path.string());
+  if (!c) return c.error();
+  if (auto k = c->check_keys("top level", {"wrist"}); !k) return k.error();
+  auto w = c->table("wrist");
+  if (!w) return w.error();
+  if (auto k = w->check_keys("wrist", {"position_m", "rotation_deg"}); !k) return k.error();
+  for (const char* key : {"position_m", "rotation_deg"}) {
+    if (!w->contains(key)) {
+      return make_error(Errc::invalid_argument, path.string() + ": [wrist] needs '" + std::string(key) + "'");
+    }
+  }
+  auto p = vec3(*w, "position_m", 1.0);
+  if (!p) return p.error();
+  auto r = vec3(*w, "rotation_deg", 360.0);
+  if (!r) return r.error();
+  return Pose{so3_exp(*r * (M_PI / 180.0)), *p};
+}
+
+std::string format_wrist_calibration(const Pose& T_device_wrist, std::string_view comment) {
+  const Vec3 r = so3_log(T_device_wrist.q) * (180.0 / M_PI);
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "# The wrist in the tracked device's grip frame (proprio calibrate wrist).\n# %.*s\n[wrist]\n"
+                "position_m = [%.5f, %.5f, %.5f]\nrotation_deg = [%.3f, %.3f, %.3f]   # rotation vector, degrees\n",
+                static_cast<int>(std::min<std::size_t>(comment.size(), 300)), comment.data(), T_device_wrist.p.x(),
+                T_device_wrist.p.y(), T_device_wrist.p.z(), r.x(), r.y(), r.z());
+  return buf;
 }
 
 std::string example_layer_config(const std::string& recording_path) {

@@ -154,6 +154,7 @@ void StretchDevice::on_report(std::span<const std::uint8_t> report, TimeNs recei
 }
 
 void StretchDevice::deliver_pending() {
+  if (pending_.empty()) return;
   for (StretchSample& s : pending_) {
     // The unwrapped device time equals the wire's counter modulo 2^32, which is what hid::ClockSync unwraps.
     TimeNs t = clock_sync_.to_host_ns(static_cast<std::uint32_t>(s.device_time_us));
@@ -175,6 +176,7 @@ void StretchDevice::deliver_pending() {
     ++stats_.samples_delivered;
   }
   pending_.clear();
+  if (burst_callback_) burst_callback_();
 }
 
 }  // namespace proprio::devices

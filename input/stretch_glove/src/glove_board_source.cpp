@@ -23,8 +23,13 @@ Result<std::unique_ptr<GloveBoardSource>> GloveBoardSource::start(std::unique_pt
   s->device_->set_sample_callback([sink](const devices::StretchSample& m) {
     const double pf = m.status == devices::StretchMeasurementStatus::ok ? m.capacitance_pf
                                                                        : std::numeric_limits<double>::quiet_NaN();
-    sink->push_measurement(m.combination, pf, m.time_ns);
+    sink->add_measurement(m.combination, pf, m.time_ns);
   });
+  // A report's measurements arrive together: the frame that falls due inside
+  // one is solved at its end, with all of them. Solving at the 16th update
+  // instead kept the rest of the report (up to 8 measurements, 8 ms) out of
+  // the pose although it was already here.
+  s->device_->set_burst_callback([sink] { sink->end_burst(); });
   if (auto st = s->device_->start(); !st) return st.error();
   return s;
 }

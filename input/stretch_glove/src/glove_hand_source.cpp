@@ -45,6 +45,16 @@ bool GloveHandSource::push_measurement(std::size_t combination, double capacitan
   return frame_ready && push_frame(frame_);
 }
 
+void GloveHandSource::add_measurement(std::size_t combination, double capacitance_pf, TimeNs t_ns) {
+  const auto rejected_before = readout_.rejected_updates();
+  readout_.record(combination, capacitance_pf, t_ns);
+  std::lock_guard lock(mutex_);
+  ++stats_.measurements;
+  stats_.measurements_rejected += readout_.rejected_updates() - rejected_before;
+}
+
+bool GloveHandSource::end_burst() { return readout_.solve_due(frame_) && push_frame(frame_); }
+
 bool GloveHandSource::push_frame(const CellFrame& frame) {
   tracker_.process(frame, pose_);
   std::lock_guard lock(mutex_);

@@ -147,6 +147,9 @@ bool GloveTracker::process(const CellFrame& frame, HandPose& out) {
     }
   }
   out = hand_model_.forward(options_.hand, angles_, last_wrist_, frame.time_ns);
+  // Latency is measured from the newest capacitance measurement behind the
+  // pose (the frame's time), not from the wrist or the 5-frame mean's centre.
+  out.data_time_ns = frame.time_ns;
   if (!have_angles_) {
     out.active = false;
     return false;

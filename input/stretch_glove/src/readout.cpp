@@ -104,6 +104,8 @@ void MatrixReadout::reset() {
   updates_ = 0;
   rejected_ = 0;
   frames_ = 0;
+  due_ = false;
+  latest_time_ns_ = 0;
 }
 
 const MatrixReadout::Factorisation& MatrixReadout::factorisation_for(const std::vector<std::uint64_t>& mask) {
@@ -179,14 +181,26 @@ void MatrixReadout::write_frame(const Eigen::VectorXd& rhs, const Factorisation&
 }
 
 bool MatrixReadout::push(std::size_t combination, double capacitance_pf, TimeNs time_ns, CellFrame& out) {
+  return record(combination, capacitance_pf, time_ns) && solve_due(out);
+}
+
+bool MatrixReadout::record(std::size_t combination, double capacitance_pf, TimeNs time_ns) {
   if (combination >= measurement_count()) {
     ++rejected_;
-    return false;
+    return due_;
   }
   const auto row = static_cast<Eigen::Index>(combination);
   latest_usable_[combination] = usable(capacitance_pf) ? 1 : 0;
   latest_(row) = latest_usable_[combination] ? capacitance_pf : 0.0;
-  if (++updates_ % static_cast<std::uint64_t>(options_.solve_every) != 0) return false;
+  latest_time_ns_ = time_ns;
+  if (++updates_ % static_cast<std::uint64_t>(options_.solve_every) == 0) due_ = true;
+  return due_;
+}
+
+bool MatrixReadout::solve_due(CellFrame& out) {
+  if (!due_) return false;
+  due_ = false;
+  const TimeNs time_ns = latest_time_ns_;
 
   // This frame of C_m: the latest value of every combination.
   const Eigen::Index m = M_.rows();

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <fmt/format.h>
 
+#include "proprio/core/log.hpp"
+
 namespace proprio::vist {
 
 Status VistLiveOptions::validate() const {
@@ -11,6 +13,10 @@ Status VistLiveOptions::validate() const {
   if (!std::isfinite(file_latency_s) || file_latency_s < 0.0 || file_latency_s > 1.0) {
     return make_error(Errc::invalid_argument,
                       fmt::format("VIST live: file_latency_s = {} must be in [0, 1] s", file_latency_s));
+  }
+  if (!std::isfinite(camera_retry_s) || camera_retry_s < 0.01 || camera_retry_s > 60.0) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("VIST live: camera_retry_s = {} must be in [0.01, 60] s", camera_retry_s));
   }
   if (!T_world_head_fixed.p.allFinite() || !T_world_head_fixed.q.coeffs().allFinite() ||
       std::abs(T_world_head_fixed.q.norm() - 1.0) > 1e-6) {
@@ -21,16 +27,18 @@ Status VistLiveOptions::validate() const {
 
 std::string VistLiveOptions::describe() const {
   const Vec3& p = T_world_head_fixed.p;
-  return fmt::format("VIST live: head (without a provider) fixed at ({:.3f}, {:.3f}, {:.3f}) m; video files "
-                     "delivered {:.0f} ms after their timestamps\n  {}",
-                     p.x(), p.y(), p.z(), 1e3 * file_latency_s, detector.describe());
+  return fmt::format(
+      "VIST live: head (without a provider) fixed at ({:.3f}, {:.3f}, {:.3f}) m; video files "
+      "delivered {:.0f} ms after their timestamps; a missing camera retried every {:g} s\n  {}",
+      p.x(), p.y(), p.z(), 1e3 * file_latency_s, camera_retry_s, detector.describe());
 }
 
 std::string VistLiveStats::describe() const {
   std::string s = fmt::format("glove {}, {} IMU samples", hid::to_string(glove_state), imu_samples);
   if (imu_unknown_sensor > 0) s += fmt::format(" ({} from IMUs the glove file does not have)", imu_unknown_sensor);
-  s += fmt::format("; camera {}, {} stereo frames, {:.1f} markers per frame, detection {:.2f} ms per pair",
-                   to_string(camera_state), frames,
+  s += fmt::format("; camera {}{}, {} stereo frames, {:.1f} markers per frame, detection {:.2f} ms per pair",
+                   camera_open ? to_string(camera_state) : "not open",
+                   camera_opens > 1 ? fmt::format(" (opened {} times)", camera_opens) : std::string(), frames,
                    frames > 0 ? static_cast<double>(markers_detected) / static_cast<double>(frames) : 0.0,
                    detection_ms_mean);
   if (frames_without_head > 0) s += fmt::format(", {} without a head pose", frames_without_head);
@@ -39,17 +47,10 @@ std::string VistLiveStats::describe() const {
   return s;
 }
 
-Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create(VistHandSource& sink, const ImuGloveDescription& glove,
-                                                             std::unique_ptr<devices::ImuGloveDevice> glove_device,
-                                                             std::unique_ptr<StereoCamera> camera,
-                                                             VistLiveOptions options, HeadPoseProvider head,
-                                                             const Clock& clock) {
-  if (!glove_device) return make_error(Errc::invalid_argument, "VIST live: no glove device");
-  if (!camera) return make_error(Errc::invalid_argument, "VIST live: no stereo camera");
-  if (glove_device->running()) return make_error(Errc::invalid_argument, "VIST live: the glove is already started");
-  if (auto s = options.validate(); !s) return s.error();
-  if (glove.imus.empty()) return make_error(Errc::invalid_argument, "VIST live: the glove description has no IMUs");
-  const cv::Size size = camera->image_size();
+namespace {
+
+Status check_camera_size(const StereoCamera& camera, const ImuGloveDescription& glove) {
+  const cv::Size size = camera.image_size();
   const PinholeCamera& expected = glove.rig.camera;
   if (!size.empty() && (size.width != expected.width_px || size.height != expected.height_px)) {
     return make_error(Errc::invalid_argument,
@@ -58,27 +59,65 @@ Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create(VistHandSource& sin
                                   size.width, size.height, glove.origin.empty() ? glove.name : glove.origin,
                                   expected.width_px, expected.height_px));
   }
-  auto detector = MarkerDetector::create(expected, options.detector);
-  if (!detector) return detector.error();
-  return std::unique_ptr<VistLiveInput>(new VistLiveInput(sink, glove.imus.size(), glove.rig.T_head_leftcam,
-                                                          std::move(glove_device), std::move(camera),
-                                                          std::move(*detector), std::move(options), std::move(head),
-                                                          clock));
+  return {};
 }
 
-VistLiveInput::VistLiveInput(VistHandSource& sink, std::size_t imu_count, Pose T_head_leftcam,
-                             std::unique_ptr<devices::ImuGloveDevice> glove, std::unique_ptr<StereoCamera> camera,
-                             MarkerDetector detector, VistLiveOptions options, HeadPoseProvider head,
-                             const Clock& clock)
+}  // namespace
+
+Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create(VistHandSource& sink, const ImuGloveDescription& glove,
+                                                             std::unique_ptr<devices::ImuGloveDevice> glove_device,
+                                                             std::unique_ptr<StereoCamera> camera,
+                                                             VistLiveOptions options, HeadPoseProvider head,
+                                                             const Clock& clock) {
+  if (!camera) return make_error(Errc::invalid_argument, "VIST live: no stereo camera");
+  if (auto s = check_camera_size(*camera, glove); !s) return s.error();
+  return make(sink, glove, std::move(glove_device), std::move(camera), nullptr, std::move(options), std::move(head),
+              clock);
+}
+
+Result<std::unique_ptr<VistLiveInput>> VistLiveInput::create_with_opener(
+    VistHandSource& sink, const ImuGloveDescription& glove, std::unique_ptr<devices::ImuGloveDevice> glove_device,
+    StereoCameraOpener open_camera, VistLiveOptions options, HeadPoseProvider head, const Clock& clock) {
+  if (!open_camera) return make_error(Errc::invalid_argument, "VIST live: no way to open a stereo camera");
+  return make(sink, glove, std::move(glove_device), nullptr, std::move(open_camera), std::move(options),
+              std::move(head), clock);
+}
+
+Result<std::unique_ptr<VistLiveInput>> VistLiveInput::make(VistHandSource& sink, const ImuGloveDescription& glove,
+                                                           std::unique_ptr<devices::ImuGloveDevice> glove_device,
+                                                           std::unique_ptr<StereoCamera> camera,
+                                                           StereoCameraOpener opener, VistLiveOptions options,
+                                                           HeadPoseProvider head, const Clock& clock) {
+  if (!glove_device) return make_error(Errc::invalid_argument, "VIST live: no glove device");
+  if (glove_device->running()) return make_error(Errc::invalid_argument, "VIST live: the glove is already started");
+  if (auto s = options.validate(); !s) return s.error();
+  if (glove.imus.empty()) return make_error(Errc::invalid_argument, "VIST live: the glove description has no IMUs");
+  auto detector = MarkerDetector::create(glove.rig.camera, options.detector);
+  if (!detector) return detector.error();
+  return std::unique_ptr<VistLiveInput>(new VistLiveInput(
+      sink, glove.imus.size(), glove.rig.camera, glove.rig.T_head_leftcam, std::move(glove_device), std::move(camera),
+      std::move(opener), std::move(*detector), std::move(options), std::move(head), clock));
+}
+
+VistLiveInput::VistLiveInput(VistHandSource& sink, std::size_t imu_count, const PinholeCamera& camera_model,
+                             Pose T_head_leftcam, std::unique_ptr<devices::ImuGloveDevice> glove,
+                             std::unique_ptr<StereoCamera> camera, StereoCameraOpener opener, MarkerDetector detector,
+                             VistLiveOptions options, HeadPoseProvider head, const Clock& clock)
     : sink_(sink),
       imu_count_(imu_count),
+      camera_model_(camera_model),
       T_head_leftcam_(T_head_leftcam),
       glove_(std::move(glove)),
       camera_(std::move(camera)),
+      opener_(std::move(opener)),
       detector_(std::move(detector)),
       options_(std::move(options)),
       head_(std::move(head)),
       clock_(clock) {
+  if (camera_) {
+    camera_stats_.camera_open = true;
+    camera_stats_.camera_opens = 1;
+  }
   // The glove's reader thread pushes straight into the tracker's queue: one
   // hand-off, and the samples keep the order the board sent them in.
   glove_->set_sample_callback([this](const devices::ImuGloveSample& g) {
@@ -112,7 +151,7 @@ void VistLiveInput::stop() {
   stop_.store(true, std::memory_order_release);
   if (camera_thread_.joinable()) camera_thread_.join();
   glove_->stop();
-  camera_->stop();
+  if (camera_) camera_->stop();
 }
 
 bool VistLiveInput::wait_until(TimeNs t_ns) {
@@ -124,18 +163,83 @@ bool VistLiveInput::wait_until(TimeNs t_ns) {
   return false;
 }
 
+bool VistLiveInput::open_camera() {
+  auto camera = opener_();
+  Status fits;
+  if (!camera) {
+    fits = camera.error();
+  } else if (!*camera) {
+    fits = make_error(Errc::unavailable, "the camera opener returned nothing");
+  } else if (const cv::Size size = (*camera)->image_size();
+             !size.empty() && (size.width != camera_model_.width_px || size.height != camera_model_.height_px)) {
+    fits = make_error(Errc::invalid_argument,
+                      fmt::format("the camera delivers {}x{} images but the glove description's rig is {}x{}",
+                                  size.width, size.height, camera_model_.width_px, camera_model_.height_px));
+  }
+  if (!fits) {
+    if (camera && *camera) (*camera)->stop();
+    const std::string why = fits.error().message;
+    if (why != last_logged_camera_error_) {
+      logger().warn("VIST live: no stereo camera: {}; trying again every {:g} s", why, options_.camera_retry_s);
+      last_logged_camera_error_ = why;
+    }
+    std::lock_guard lock(stats_mutex_);
+    ++camera_stats_.camera_open_failures;
+    camera_stats_.camera_error = why;
+    return false;
+  }
+  logger().info("VIST live: camera open: {}", (*camera)->describe());
+  last_logged_camera_error_.clear();
+  std::lock_guard lock(stats_mutex_);
+  camera_ = std::move(*camera);
+  camera_stats_.camera_open = true;
+  ++camera_stats_.camera_opens;
+  camera_stats_.camera_error.clear();
+  return true;
+}
+
+void VistLiveInput::drop_camera(std::string why) {
+  camera_->stop();
+  if (why != last_logged_camera_error_) {
+    logger().warn("VIST live: camera lost: {}; reopening every {:g} s", why, options_.camera_retry_s);
+    last_logged_camera_error_ = why;
+  }
+  std::unique_ptr<StereoCamera> gone;
+  {
+    std::lock_guard lock(stats_mutex_);
+    gone = std::move(camera_);
+    camera_stats_.camera_open = false;
+    camera_stats_.camera_error = std::move(why);
+  }
+}
+
 void VistLiveInput::camera_loop() {
-  const bool file = camera_->options().input == StereoInput::file;
-  const DurationNs file_latency_ns = seconds_to_ns(options_.file_latency_s);
   std::string ended;
   while (!stop_.load(std::memory_order_acquire)) {
+    if (!camera_) {
+      if (!opener_) break;
+      if (!open_camera()) {
+        if (!wait_until(clock_.now_ns() + seconds_to_ns(options_.camera_retry_s))) break;
+        continue;
+      }
+    }
+    const bool file = camera_->options().input == StereoInput::file;
     auto frame = camera_->next(0.25);
     if (!frame) {
       if (frame.error().code == Errc::unavailable) continue;  // nothing yet: check for stop, wait again
-      ended = frame.error().code == Errc::out_of_range ? "end of the video" : frame.error().message;
-      break;
+      if (frame.error().code == Errc::out_of_range) {
+        ended = "end of the video";
+        break;
+      }
+      if (!opener_) {
+        ended = frame.error().message;
+        break;
+      }
+      drop_camera(frame.error().message);
+      if (!wait_until(clock_.now_ns() + seconds_to_ns(options_.camera_retry_s))) break;
+      continue;
     }
-    if (file && !wait_until(frame->t_ns + file_latency_ns)) break;
+    if (file && !wait_until(frame->t_ns + seconds_to_ns(options_.file_latency_s))) break;
     VistStereoFrame out;
     out.capture_time_ns = frame->t_ns;
     const auto t0 = std::chrono::steady_clock::now();
@@ -156,10 +260,12 @@ void VistLiveInput::camera_loop() {
       }
       ++camera_stats_.frames;
       camera_stats_.markers_detected += out.left.markers.size() + out.right.markers.size();
+      camera_stats_.last_frame_capture_ns = frame->t_ns;
       detection_ms_sum_ += ms;
     }
     out.T_world_leftcam = T_world_head * T_head_leftcam_;
     sink_.push_stereo_frame(std::move(out));
+    last_frame_ns_.store(frame->t_ns, std::memory_order_release);
   }
   {
     std::lock_guard lock(stats_mutex_);
@@ -174,9 +280,9 @@ VistLiveStats VistLiveInput::stats() const {
     std::lock_guard lock(stats_mutex_);
     s = camera_stats_;
     s.detection_ms_mean = s.frames > 0 ? detection_ms_sum_ / static_cast<double>(s.frames) : 0.0;
+    s.camera_state = camera_ ? camera_->state() : CameraState::stopped;
   }
   s.glove_state = glove_->state();
-  s.camera_state = camera_->state();
   s.imu_samples = imu_samples_.load(std::memory_order_relaxed);
   s.imu_unknown_sensor = imu_unknown_.load(std::memory_order_relaxed);
   return s;

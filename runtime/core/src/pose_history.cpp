@@ -57,13 +57,17 @@ Status PoseHistory::push(const HandPose& sample) {
                                                   " ns is not newer than the newest one (t=" +
                                                   std::to_string(newest_time_ns()) + " ns)");
   }
+  HandPose* slot;
   if (size_ < ring_.size()) {
-    ring_[(head_ + size_) % ring_.size()] = sample;
+    slot = &ring_[(head_ + size_) % ring_.size()];
     ++size_;
   } else {
-    ring_[head_] = sample;  // overwrite the oldest
+    slot = &ring_[head_];  // overwrite the oldest
     head_ = (head_ + 1) % ring_.size();
   }
+  *slot = sample;
+  if (slot->data_time_ns == 0) slot->data_time_ns = sample.time_ns;
+  if (slot->ready_time_ns == 0) slot->ready_time_ns = MonotonicClock::instance().now_ns();
   return {};
 }
 
@@ -118,11 +122,15 @@ PoseLookup PoseHistory::lookup(TimeNs t, HandPose& out) const noexcept {
     // Interpolating into or out of an inactive pose would invent data; the nearer one wins.
     out = (t - a.time_ns <= b.time_ns - t) ? a : b;
     out.time_ns = t;
+    out.data_time_ns = b.data_time_ns;
+    out.ready_time_ns = b.ready_time_ns;
     return PoseLookup::interpolated;
   }
   const double s = static_cast<double>(t - a.time_ns) / static_cast<double>(b.time_ns - a.time_ns);
   out = a;
   out.time_ns = t;
+  out.data_time_ns = b.data_time_ns;
+  out.ready_time_ns = b.ready_time_ns;
   for (std::size_t i = 0; i < kHandJointCount; ++i) {
     out.T_world_joint[i] = interpolate(a.T_world_joint[i], b.T_world_joint[i], s);
     out.radius_m[i] = a.radius_m[i] + s * (b.radius_m[i] - a.radius_m[i]);

@@ -597,6 +597,11 @@ PoseLookup ReplayHandSource::lookup(Handedness hand, TimeNs t_ns, HandPose& out)
   if (moved) s.wake.notify_one();
   if (is_usable(r)) out.time_ns = t_ns;
   if (r == PoseLookup::stale) out.time_ns += t_ns - file_t;  // back to the caller's clock
+  if (is_usable(r) || r == PoseLookup::stale) {
+    // A recorded pose counts as measured, and servable, when its time comes on the caller's clock.
+    out.data_time_ns += t_ns - file_t;
+    out.ready_time_ns = out.data_time_ns;
+  }
   return r;
 }
 

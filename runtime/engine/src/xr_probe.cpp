@@ -19,13 +19,16 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <thread>
 
 #include "proprio/core/log.hpp"
 #include "proprio/engine/xr_vulkan.hpp"
 #include "proprio/core/xr_ext.hpp"
+#include "proprio/openxr/XR_PROPRIO_hand_tracking_latency.h"
 #include "proprio/render/context.hpp"
+#include "xr_probe_hooks.hpp"
 #include "xr_util.hpp"
 
 namespace proprio::engine {
@@ -54,6 +57,19 @@ std::string_view to_string(XrProbeSpace s) noexcept {
   }
   return "?";
 }
+double XrProbeLatency::quantile_ms(const std::vector<std::uint64_t>& bins, double bin_ms, double q) {
+  std::uint64_t total = 0;
+  for (auto c : bins) total += c;
+  if (total == 0) return std::numeric_limits<double>::quiet_NaN();
+  const double target = q * static_cast<double>(total);
+  std::uint64_t seen = 0;
+  for (std::size_t i = 0; i < bins.size(); ++i) {
+    seen += bins[i];
+    if (static_cast<double>(seen) >= target) return static_cast<double>(i + 1) * bin_ms;
+  }
+  return static_cast<double>(bins.size()) * bin_ms;
+}
+
 std::string_view to_string(XrProbeHand h) noexcept { return h == XrProbeHand::left ? "left" : "right"; }
 
 Status XrProbeOptions::validate() const {
@@ -125,7 +141,8 @@ bool failed(const Step& s) { return !std::holds_alternative<std::monostate>(s); 
 
 class Probe {
  public:
-  Probe(const XrProbeOptions& options, const XrProbeReport& report) : options_(options), report_(report) {}
+  Probe(const XrProbeOptions& options, const XrProbeReport& report, const detail::XrProbeHooks& hooks)
+      : options_(options), report_(report), hooks_(hooks) {}
   ~Probe() { teardown(); }
   Result<XrProbeSummary> run();
 
@@ -177,6 +194,8 @@ class Probe {
 
   const XrProbeOptions& options_;
   const XrProbeReport& report_;
+  const detail::XrProbeHooks& hooks_;
+  std::vector<const char*> hook_extensions_;  // what hooks_.extensions asked to enable
   std::vector<XrExtensionProperties> offered_;
   bool has_headless_ext_ = false, has_vulkan_ext_ = false;
   bool reported_system_ = false;
@@ -206,6 +225,8 @@ class Probe {
   PFN_xrDestroyHandTrackerEXT destroy_hand_tracker_ = nullptr;
   PFN_xrLocateHandJointsEXT locate_hand_joints_ = nullptr;
   PFN_xrConvertTimespecTimeToTimeKHR convert_timespec_ = nullptr;
+  bool has_latency_ext_ = false;
+  PFN_xrGetHandTrackingLatencyPROPRIO get_latency_ = nullptr;
 };
 
 // Lists the instance extensions (the runtime's and the app-enabled layer's)
@@ -242,8 +263,13 @@ Step Probe::check_extensions() {
   std::string list;
   for (const auto& e : offered_) list += (list.empty() ? "" : ", ") + std::string(e.extensionName);
   logger().debug("instance extensions offered: {}", list);
+  // Before the probe's own checks, so a hook can say what its caller lacks first.
+  hook_extensions_.clear();
+  if (hooks_.extensions) {
+    if (Status s = hooks_.extensions(offered_, hook_extensions_); !s) return s.error();
+  }
 
-  if (!detail::has_extension(offered_, XR_EXT_HAND_TRACKING_EXTENSION_NAME)) {
+  if (hooks_.hand_tracking && !detail::has_extension(offered_, XR_EXT_HAND_TRACKING_EXTENSION_NAME)) {
     return make_error(kXrProbeNoHandTracking,
                       "XR_EXT_hand_tracking is not offered by the active runtime or any enabled API layer. Enable "
                       "Proprio's layer: 'proprio layer status' says what the loader sees and what to do");
@@ -257,6 +283,8 @@ Step Probe::check_extensions() {
   has_vulkan_ext_ = detail::has_extension(offered_, XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME);
   has_data_source_ext_ =
       options_.data_source && detail::has_extension(offered_, XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME);
+  has_latency_ext_ =
+      hooks_.hand_tracking && detail::has_extension(offered_, XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME);
   if (options_.data_source && !has_data_source_ext_) emit(XrProbeDataSourceNotOffered{});
   return {};
 }
@@ -266,9 +294,12 @@ Step Probe::check_extensions() {
 // versions create no compositor for an instance that enabled it).
 Step Probe::create_instance(XrProbeSessionKind kind) {
   std::vector<const char*> enabled = {
-      XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME,
+      XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME,
       kind == XrProbeSessionKind::headless ? XR_MND_HEADLESS_EXTENSION_NAME : XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME};
+  if (hooks_.hand_tracking) enabled.push_back(XR_EXT_HAND_TRACKING_EXTENSION_NAME);
+  enabled.insert(enabled.end(), hook_extensions_.begin(), hook_extensions_.end());
   if (has_data_source_ext_) enabled.push_back(XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME);
+  if (has_latency_ext_) enabled.push_back(XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME);
   const char* layers[] = {options_.api_layer.c_str()};
 
   XrInstanceCreateInfo ci{XR_TYPE_INSTANCE_CREATE_INFO};
@@ -292,11 +323,18 @@ Step Probe::create_instance(XrProbeSessionKind kind) {
     emit(XrProbeRuntime{ip.runtimeName, XR_VERSION_MAJOR(ip.runtimeVersion), XR_VERSION_MINOR(ip.runtimeVersion),
                         XR_VERSION_PATCH(ip.runtimeVersion)});
   }
-  Step loaded = load("xrCreateHandTrackerEXT", create_hand_tracker_);
-  if (!failed(loaded)) loaded = load("xrDestroyHandTrackerEXT", destroy_hand_tracker_);
-  if (!failed(loaded)) loaded = load("xrLocateHandJointsEXT", locate_hand_joints_);
-  if (!failed(loaded)) loaded = load("xrConvertTimespecTimeToTimeKHR", convert_timespec_);
+  Step loaded = load("xrConvertTimespecTimeToTimeKHR", convert_timespec_);
+  if (hooks_.hand_tracking) {
+    if (!failed(loaded)) loaded = load("xrCreateHandTrackerEXT", create_hand_tracker_);
+    if (!failed(loaded)) loaded = load("xrDestroyHandTrackerEXT", destroy_hand_tracker_);
+    if (!failed(loaded)) loaded = load("xrLocateHandJointsEXT", locate_hand_joints_);
+  }
   if (failed(loaded)) return loaded;
+  get_latency_ = nullptr;
+  if (has_latency_ext_ && failed(load("xrGetHandTrackingLatencyPROPRIO", get_latency_))) {
+    logger().warn("XR_PROPRIO_hand_tracking_latency is offered but its function is not: no latency histogram");
+    get_latency_ = nullptr;
+  }
 
   XrSystemGetInfo gi{XR_TYPE_SYSTEM_GET_INFO};
   gi.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
@@ -315,10 +353,13 @@ Step Probe::create_instance(XrProbeSessionKind kind) {
     emit(XrProbeSystem{sp.systemName, sp.vendorId, ht.supportsHandTracking == XR_TRUE, has_data_source_ext_});
     reported_system_ = true;
   }
-  if (!ht.supportsHandTracking) {
+  if (hooks_.hand_tracking && !ht.supportsHandTracking) {
     return make_error(kXrProbeNoHandTracking,
                       "the system reports supportsHandTracking = false: no hand tracker can be created. If Proprio's "
                       "layer is enabled, check its configuration and log ('proprio layer status')");
+  }
+  if (hooks_.instance_created) {
+    if (Status s = hooks_.instance_created(instance_, system_); !s) return s.error();
   }
   return {};
 }
@@ -417,8 +458,8 @@ Step Probe::create_session(XrProbeSessionKind kind) {
     hands_.emplace_back();
     hands_.back().which = which;
   };
-  if (options_.hands != XrProbeHands::right) add_hand(XrProbeHand::left);
-  if (options_.hands != XrProbeHands::left) add_hand(XrProbeHand::right);
+  if (hooks_.hand_tracking && options_.hands != XrProbeHands::right) add_hand(XrProbeHand::left);
+  if (hooks_.hand_tracking && options_.hands != XrProbeHands::left) add_hand(XrProbeHand::right);
   for (auto& h : hands_) {
     XrHandTrackingDataSourceEXT sources[] = {XR_HAND_TRACKING_DATA_SOURCE_UNOBSTRUCTED_EXT,
                                              XR_HAND_TRACKING_DATA_SOURCE_CONTROLLER_EXT};
@@ -432,6 +473,9 @@ Step Probe::create_session(XrProbeSessionKind kind) {
     if (const XrResult r = create_hand_tracker_(session_, &hci, &h.tracker); XR_FAILED(r)) {
       return call_error(r, fmt::format("xrCreateHandTrackerEXT({})", h.name()).c_str());
     }
+  }
+  if (hooks_.session_started) {
+    if (Status s = hooks_.session_started(session_, space_); !s) return s.error();
   }
   emit(XrProbeSessionStarted{kind, device});
   return {};
@@ -702,6 +746,12 @@ LoopEnd Probe::run_frames() {
       end = LoopEnd::failed;
       break;
     }
+    bool keep_going = true;
+    if (hooks_.frame) {
+      detail::XrProbeFrame frame{t, std::chrono::duration<double>(clock::now() - start).count(), session_, space_, {}};
+      for (const auto& h : hands_) frame.hands.push_back({h.which, h.active, h.joints.data()});
+      keep_going = hooks_.frame(frame);
+    }
     XrFrameEndInfo fei{XR_TYPE_FRAME_END_INFO};
     fei.displayTime = t;
     fei.environmentBlendMode = blend_mode_;
@@ -713,6 +763,7 @@ LoopEnd Probe::run_frames() {
       break;
     }
     ++frames_;
+    if (!keep_going) break;
 
     const double window_s = std::chrono::duration<double>(clock::now() - window_start).count();
     if (window_s >= 1.0) {
@@ -735,6 +786,20 @@ Result<XrProbeSummary> Probe::summarise(LoopEnd end) {
   summary.frames = frames_;
   summary.kind = kind_;
   for (const auto& h : hands_) summary.hands.emplace_back(h.which, h.total);
+  for (const auto& h : hands_) {
+    if (!get_latency_ || h.tracker == XR_NULL_HANDLE) continue;
+    XrHandTrackingLatencyPROPRIO l{XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO};
+    if (!ok(get_latency_(h.tracker, &l), "xrGetHandTrackingLatencyPROPRIO")) continue;
+    XrProbeLatency out;
+    out.poses = l.poseCount;
+    out.bin_ms = l.binWidthMs;
+    const std::size_t n = std::min<std::size_t>(l.binCount, XR_PROPRIO_LATENCY_BIN_COUNT);
+    out.sample_to_ready.assign(l.sampleToReady, l.sampleToReady + n);
+    out.age_at_locate.assign(l.ageAtLocate, l.ageAtLocate + n);
+    out.max_sample_to_ready_ms = l.maxSampleToReadyMs;
+    out.max_age_at_locate_ms = l.maxAgeAtLocateMs;
+    summary.latency.emplace_back(h.which, std::move(out));
+  }
   emit(summary);
   const bool torn_down = teardown();
   if (end == LoopEnd::failed || failed_ || !torn_down) {
@@ -779,6 +844,7 @@ bool Probe::teardown() {
       session_running_ = false;
     }
   }
+  if (hooks_.session_ending) hooks_.session_ending();
   for (auto& h : hands_) {
     if (h.tracker != XR_NULL_HANDLE) {
       check(destroy_hand_tracker_(h.tracker), "xrDestroyHandTrackerEXT");
@@ -807,8 +873,14 @@ bool Probe::teardown() {
 }  // namespace
 
 Result<XrProbeSummary> run_xr_probe(const XrProbeOptions& options, const XrProbeReport& report) {
+  static const detail::XrProbeHooks kNoHooks;
+  return detail::run_xr_probe_hooked(options, report, kNoHooks);
+}
+
+Result<XrProbeSummary> detail::run_xr_probe_hooked(const XrProbeOptions& options, const XrProbeReport& report,
+                                                   const XrProbeHooks& hooks) {
   if (Status s = options.validate(); !s) return s.error();
-  Probe probe(options, report);
+  Probe probe(options, report, hooks);
   return probe.run();
 }
 

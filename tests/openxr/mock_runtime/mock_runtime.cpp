@@ -30,6 +30,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -41,15 +42,19 @@
 #include <deque>
 #include <filesystem>
 #include <initializer_list>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <new>
 #include <optional>
+#include <set>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <type_traits>
 #include <unordered_map>
+#include <variant>
 #include <vector>
 
 namespace {
@@ -103,6 +108,17 @@ std::optional<uint32_t> env_uint(const char* name, uint32_t fallback) {
     return fallback;
   }
   return static_cast<uint32_t>(n);
+}
+
+// "0" or "1" from the environment; `fallback` when unset or empty, and (with
+// a warning) when malformed.
+bool env_flag(const char* name, bool fallback) {
+  const char* value = std::getenv(name);
+  if (value == nullptr || value[0] == '\0') return fallback;
+  const std::string_view v(value);
+  if (v == "0" || v == "1") return v == "1";
+  warn("%s=%s is neither 0 nor 1; using %d", name, value, fallback ? 1 : 0);
+  return fallback;
 }
 
 // PROPRIO_MOCK_RUNTIME_VIEW_SIZE=WxH (each 1..4096); else 640x360.
@@ -222,7 +238,23 @@ struct Entry<Name, Impl> {
 };
 
 // ---------------------------------------------------------------- state --
-enum class Ext { none, convert_timespec_time, headless, hand_tracking, vulkan_enable2 };
+enum class Ext { none, convert_timespec_time, headless, hand_tracking, vulkan_enable2, vive_tracker };
+
+// XR_HTCX_vive_tracker_interaction gained the wrist and ankle roles in
+// revision 3; Debian's 1.0.20 header still says revision 1.
+constexpr uint32_t kViveTrackerSpecVersion = 3;
+
+// PROPRIO_MOCK_RUNTIME_HAND_TRACKING: "1" offers native hand tracking with
+// fixed joints, "moving" with the analytic hand of mock_motion.hpp.
+enum class HandTrackingMode { off, fixed, moving };
+HandTrackingMode hand_tracking_mode() {
+  const char* value = std::getenv("PROPRIO_MOCK_RUNTIME_HAND_TRACKING");
+  if (value == nullptr) return HandTrackingMode::off;
+  const std::string_view v(value);
+  if (v == "1") return HandTrackingMode::fixed;
+  if (v == "moving") return HandTrackingMode::moving;
+  return HandTrackingMode::off;
+}
 
 struct ExtensionInfo {
   const char* name;
@@ -238,8 +270,9 @@ std::vector<ExtensionInfo> offered_extensions() {
        Ext::convert_timespec_time},
       {XR_MND_HEADLESS_EXTENSION_NAME, XR_MND_headless_SPEC_VERSION, Ext::headless},
       {XR_KHR_VULKAN_ENABLE2_EXTENSION_NAME, XR_KHR_vulkan_enable2_SPEC_VERSION, Ext::vulkan_enable2},
+      {XR_HTCX_VIVE_TRACKER_INTERACTION_EXTENSION_NAME, kViveTrackerSpecVersion, Ext::vive_tracker},
   };
-  if (env_is_one("PROPRIO_MOCK_RUNTIME_HAND_TRACKING")) {
+  if (hand_tracking_mode() != HandTrackingMode::off) {
     list.push_back({XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_EXT_hand_tracking_SPEC_VERSION, Ext::hand_tracking});
   }
   return list;
@@ -326,13 +359,266 @@ struct VulkanDeviceRecord {
   std::vector<std::pair<uint32_t, uint32_t>> queues;  // (family, count) from VkDeviceCreateInfo
 };
 
+// ---- input devices: simple controllers and VIVE wrist trackers ----
+enum class Device { left_controller, right_controller, left_tracker, right_tracker };
+constexpr std::size_t kDeviceCount = 4;
+constexpr const char* kDeviceNames[kDeviceCount] = {"left_controller", "right_controller", "left_tracker",
+                                                    "right_tracker"};
+constexpr bool is_tracker(Device d) { return d == Device::left_tracker || d == Device::right_tracker; }
+constexpr mx::Hand hand_of(Device d) {
+  return d == Device::left_controller || d == Device::left_tracker ? mx::Hand::left : mx::Hand::right;
+}
+
+constexpr std::string_view kSimpleControllerProfile = "/interaction_profiles/khr/simple_controller";
+constexpr std::string_view kViveTrackerProfile = "/interaction_profiles/htc/vive_tracker_htcx";
+constexpr std::string_view kHandPaths[] = {"/user/hand/left", "/user/hand/right"};
+// Core top-level paths that have no device here but are valid subaction paths.
+constexpr std::string_view kOtherTopLevelPaths[] = {"/user/head", "/user/gamepad"};
+// XR_HTCX_vive_tracker_interaction revision 3.
+constexpr std::string_view kTrackerRolePaths[] = {
+    "/user/vive_tracker_htcx/role/handheld_object", "/user/vive_tracker_htcx/role/left_foot",
+    "/user/vive_tracker_htcx/role/right_foot",      "/user/vive_tracker_htcx/role/left_shoulder",
+    "/user/vive_tracker_htcx/role/right_shoulder",  "/user/vive_tracker_htcx/role/left_elbow",
+    "/user/vive_tracker_htcx/role/right_elbow",     "/user/vive_tracker_htcx/role/left_knee",
+    "/user/vive_tracker_htcx/role/right_knee",      "/user/vive_tracker_htcx/role/waist",
+    "/user/vive_tracker_htcx/role/chest",           "/user/vive_tracker_htcx/role/camera",
+    "/user/vive_tracker_htcx/role/keyboard",        "/user/vive_tracker_htcx/role/left_wrist",
+    "/user/vive_tracker_htcx/role/right_wrist",     "/user/vive_tracker_htcx/role/left_ankle",
+    "/user/vive_tracker_htcx/role/right_ankle"};
+// The two trackers (left_tracker, right_tracker): persistent and role paths.
+constexpr const char* kTrackerPersistentPaths[] = {"/devices/htc/vive_trackerLHR-MOCK0001",
+                                                   "/devices/htc/vive_trackerLHR-MOCK0002"};
+constexpr const char* kTrackerRoles[] = {"/user/vive_tracker_htcx/role/left_wrist",
+                                         "/user/vive_tracker_htcx/role/right_wrist"};
+
+// Where each device sits and which profile drives it.
+struct DeviceSlot {
+  Device device;
+  std::string_view top_level;
+  std::string_view profile;
+};
+constexpr DeviceSlot kDeviceSlots[kDeviceCount] = {
+    {Device::left_controller, kHandPaths[0], kSimpleControllerProfile},
+    {Device::right_controller, kHandPaths[1], kSimpleControllerProfile},
+    {Device::left_tracker, kTrackerRoles[0], kViveTrackerProfile},
+    {Device::right_tracker, kTrackerRoles[1], kViveTrackerProfile},
+};
+
+enum class InputKind { boolean, scalar, vector2, pose, haptic };
+struct InputSource {
+  std::string_view subpath;  // below the top-level path, e.g. "input/select/click"
+  InputKind kind;
+};
+constexpr InputSource kSimpleControllerInputs[] = {
+    {"input/select/click", InputKind::boolean}, {"input/menu/click", InputKind::boolean},
+    {"input/grip/pose", InputKind::pose},       {"input/aim/pose", InputKind::pose},
+    {"output/haptic", InputKind::haptic},
+};
+constexpr InputSource kViveTrackerInputs[] = {
+    {"input/system/click", InputKind::boolean},   {"input/menu/click", InputKind::boolean},
+    {"input/trigger/click", InputKind::boolean},  {"input/squeeze/click", InputKind::boolean},
+    {"input/trigger/value", InputKind::scalar},   {"input/trackpad", InputKind::vector2},
+    {"input/trackpad/x", InputKind::scalar},      {"input/trackpad/y", InputKind::scalar},
+    {"input/trackpad/click", InputKind::boolean}, {"input/trackpad/touch", InputKind::boolean},
+    {"input/grip/pose", InputKind::pose},         {"output/haptic", InputKind::haptic},
+};
+
+struct Profile {
+  std::string_view path;
+  Ext ext;  // the extension an app must enable to use it
+  std::span<const InputSource> inputs;
+  std::span<const std::string_view> top_levels;
+  const char* localized_name;
+};
+constexpr Profile kProfiles[] = {
+    {kSimpleControllerProfile, Ext::none, kSimpleControllerInputs, kHandPaths, "Simple Controller"},
+    {kViveTrackerProfile, Ext::vive_tracker, kViveTrackerInputs, kTrackerRolePaths, "VIVE Tracker"},
+};
+
+// A subpath the profile accepts in a binding: an input source, or an
+// identifier without its component ("input/select" for "input/select/click").
+bool is_binding_subpath(const Profile& profile, std::string_view subpath) {
+  for (const InputSource& input : profile.inputs) {
+    if (input.subpath == subpath) return true;
+  }
+  if (!subpath.starts_with("input/")) return false;
+  for (const InputSource& input : profile.inputs) {
+    if (input.subpath.size() > subpath.size() && input.subpath.starts_with(subpath) &&
+        input.subpath[subpath.size()] == '/') {
+      return true;
+    }
+  }
+  return false;
+}
+
+struct BindingPath {
+  std::string_view top_level;
+  std::string_view subpath;
+};
+// A binding path of `profile` split at its top-level path; nullopt if the
+// profile has no such binding.
+std::optional<BindingPath> split_binding(const Profile& profile, std::string_view path) {
+  for (std::string_view top : profile.top_levels) {
+    if (path.size() > top.size() + 1 && path.starts_with(top) && path[top.size()] == '/') {
+      const std::string_view subpath = path.substr(top.size() + 1);
+      if (is_binding_subpath(profile, subpath)) return BindingPath{top, subpath};
+      return std::nullopt;
+    }
+  }
+  return std::nullopt;
+}
+
+constexpr bool compatible(InputKind kind, XrActionType type) {
+  switch (type) {
+    case XR_ACTION_TYPE_BOOLEAN_INPUT:
+    case XR_ACTION_TYPE_FLOAT_INPUT:
+      return kind == InputKind::boolean || kind == InputKind::scalar;
+    case XR_ACTION_TYPE_VECTOR2F_INPUT:
+      return kind == InputKind::vector2;
+    case XR_ACTION_TYPE_POSE_INPUT:
+      return kind == InputKind::pose;
+    case XR_ACTION_TYPE_VIBRATION_OUTPUT:
+      return kind == InputKind::haptic;
+    default:
+      return false;
+  }
+}
+
+// The input source an action of `type` reads through a binding subpath: the
+// source itself when compatible, else for an identifier the component the
+// spec prefers (boolean: click then value; float: value then click; pose:
+// pose). nullptr: incompatible, the binding is ignored.
+const InputSource* resolve_input(const Profile& profile, std::string_view subpath, XrActionType type) {
+  auto find = [&](std::string_view wanted) -> const InputSource* {
+    for (const InputSource& input : profile.inputs) {
+      if (input.subpath == wanted) return &input;
+    }
+    return nullptr;
+  };
+  if (const InputSource* exact = find(subpath); exact != nullptr && compatible(exact->kind, type)) return exact;
+  static constexpr std::string_view kBoolean[] = {"click", "value"};
+  static constexpr std::string_view kFloat[] = {"value", "click"};
+  static constexpr std::string_view kPose[] = {"pose"};
+  std::span<const std::string_view> components;
+  if (type == XR_ACTION_TYPE_BOOLEAN_INPUT) components = kBoolean;
+  if (type == XR_ACTION_TYPE_FLOAT_INPUT) components = kFloat;
+  if (type == XR_ACTION_TYPE_POSE_INPUT) components = kPose;
+  for (std::string_view component : components) {
+    const std::string wanted = std::string(subpath) + "/" + std::string(component);
+    if (const InputSource* child = find(wanted); child != nullptr && compatible(child->kind, type)) return child;
+  }
+  return nullptr;
+}
+
+// A suggested binding resolved for its action's type (at xrAttachSessionActionSets).
+struct Source {
+  std::string_view profile;
+  std::string_view top_level;
+  std::string_view subpath;  // the input source read (kProfiles' table)
+  InputKind kind;
+  std::string path;  // top_level + "/" + subpath
+  std::optional<Device> device;  // none: a top-level path without a device (e.g. /user/vive_tracker_htcx/role/waist)
+};
+
+std::optional<Device> device_at(std::string_view profile, std::string_view top_level) {
+  for (const DeviceSlot& slot : kDeviceSlots) {
+    if (slot.profile == profile && slot.top_level == top_level) return slot.device;
+  }
+  return std::nullopt;
+}
+
+// What a source reads at `time` (booleans as 0 or 1): only select/click moves.
+double source_value(const Source& source, XrTime time) {
+  if (source.device && !is_tracker(*source.device) && source.subpath == "input/select/click") {
+    return mx::select_pressed(hand_of(*source.device), time) ? 1.0 : 0.0;
+  }
+  return 0.0;
+}
+
+// A pose source's device motion in LOCAL.
+mx::Motion device_motion(Device device, std::string_view subpath, XrTime time) {
+  if (is_tracker(device)) return mx::tracker_pose(hand_of(device), time);
+  if (subpath == "input/aim/pose") return mx::controller_aim(hand_of(device), time);
+  return mx::controller_grip(hand_of(device), time);
+}
+
+// PROPRIO_MOCK_RUNTIME_CONTROLLERS, _TRACKERS and _DISCONNECT, read at
+// xrCreateInstance and again at each xrCreateSession.
+struct DisconnectWindow {
+  Device device;
+  int64_t from_ns;  // after DeviceConfig::origin
+  int64_t to_ns;
+};
+struct DeviceConfig {
+  bool controllers = true;
+  bool trackers = true;
+  std::vector<DisconnectWindow> disconnects;
+  XrTime origin = 0;  // when the configuration was read: the script's t = 0
+};
+
+// PROPRIO_MOCK_RUNTIME_DISCONNECT=<device>:<from>-<to>[,...], seconds after
+// the configuration was read; a malformed entry is skipped with a warning.
+std::vector<DisconnectWindow> parse_disconnects(std::string_view text) {
+  std::vector<DisconnectWindow> windows;
+  while (!text.empty()) {
+    const std::size_t comma = std::min(text.find(','), text.size());
+    const std::string entry(text.substr(0, comma));
+    text.remove_prefix(std::min(comma + 1, text.size()));
+    const std::size_t colon = entry.find(':');
+    std::optional<Device> device;
+    for (std::size_t d = 0; d < kDeviceCount && colon != std::string::npos; ++d) {
+      if (entry.compare(0, colon, kDeviceNames[d]) == 0) device = static_cast<Device>(d);
+    }
+    double from = 0, to = 0;
+    char tail = 0;
+    if (!device || std::sscanf(entry.c_str() + colon + 1, "%lf-%lf%c", &from, &to, &tail) != 2 ||
+        !(from >= 0) || !(to > from) || to > 1e6) {
+      warn("PROPRIO_MOCK_RUNTIME_DISCONNECT: '%s' is not <device>:<from>-<to> (seconds, 0 <= from < to, device "
+           "one of left_controller, right_controller, left_tracker, right_tracker); ignored",
+           entry.c_str());
+      continue;
+    }
+    windows.push_back({*device, static_cast<int64_t>(from * 1e9), static_cast<int64_t>(to * 1e9)});
+  }
+  return windows;
+}
+
+DeviceConfig read_device_config() {
+  DeviceConfig config;
+  config.controllers = env_flag("PROPRIO_MOCK_RUNTIME_CONTROLLERS", true);
+  config.trackers = env_flag("PROPRIO_MOCK_RUNTIME_TRACKERS", true);
+  if (const char* script = std::getenv("PROPRIO_MOCK_RUNTIME_DISCONNECT"))
+    config.disconnects = parse_disconnects(script);
+  config.origin = mx::xr_time_now();
+  return config;
+}
+
+// Queued for xrPollEvent.
+using Event = std::variant<XrEventDataSessionStateChanged, XrEventDataInteractionProfileChanged,
+                           XrEventDataViveTrackerConnectedHTCX>;
+
+// xrSuggestInteractionProfileBindings, as given (validated).
+struct SuggestedBinding {
+  uint64_t action = 0;
+  std::string path;
+};
+
 struct InstanceState {
   bool convert_timespec_time = false;
   bool headless = false;
   bool hand_tracking = false;
   bool vulkan_enable2 = false;
-  std::deque<XrEventDataSessionStateChanged> events;
+  bool vive_tracker = false;
+  std::deque<Event> events;
   std::vector<std::string> paths;  // XrPath p names paths[p - 1]
+
+  // Input: the latest suggestion per interaction profile, and the devices.
+  std::map<std::string, std::vector<SuggestedBinding>, std::less<>> suggestions;
+  DeviceConfig devices;
+  std::array<bool, 2> tracker_seen{};  // each tracker connected at the last refresh_trackers
+  // What XR_TYPE_EVENT_DATA_VIVE_TRACKER_CONNECTED_HTCX events point at; the
+  // instance's node in the registry never moves, so neither do these.
+  std::array<XrViveTrackerPathsHTCX, 2> tracker_paths{};
 
   // XR_KHR_vulkan_enable2
   bool vulkan_requirements_queried = false;
@@ -366,6 +652,8 @@ struct InstanceState {
         return hand_tracking;
       case Ext::vulkan_enable2:
         return vulkan_enable2;
+      case Ext::vive_tracker:
+        return vive_tracker;
     }
     return false;
   }
@@ -393,6 +681,24 @@ struct VulkanSession {
   VkDeviceSize staging_size = 0;
 };
 
+// What xrGetActionState* report until the next xrSyncActions.
+struct ActionValue {
+  bool active = false;
+  bool changed = false;
+  XrTime last_change = 0;
+  float x = 0, y = 0;  // boolean (x != 0), float (x) or vector2 (x, y)
+  std::optional<std::size_t> pose_source;  // into AttachedAction::sources
+};
+
+struct AttachedAction {
+  uint64_t set = 0;
+  uint32_t priority = 0;
+  XrActionType type = XR_ACTION_TYPE_BOOLEAN_INPUT;
+  std::vector<std::string> subaction_paths;
+  std::vector<Source> sources;  // compatible bindings, in suggestion order
+  std::map<std::string, ActionValue, std::less<>> values;  // by subaction path, "" for XR_NULL_PATH
+};
+
 struct SessionState {
   uint64_t instance = 0;
   XrSessionState state = XR_SESSION_STATE_UNKNOWN;
@@ -411,6 +717,15 @@ struct SessionState {
   bool monado_headless = false;
   std::string capture_dir;         // empty: no capture
   uint32_t capture_frames = kDefaultCaptureFrames;  // 0: every frame
+  HandTrackingMode hand_tracking = HandTrackingMode::fixed;  // when the instance enabled it
+
+  // Actions: a snapshot taken at xrAttachSessionActionSets (attached sets are
+  // immutable, so it never goes stale), and the states of the last sync.
+  bool attached = false;
+  std::unordered_map<uint64_t, uint32_t> attached_sets;  // id -> priority
+  std::unordered_map<uint64_t, AttachedAction> actions;  // by action id
+  std::set<std::string, std::less<>> suggested_profiles;  // with a binding of an attached action
+  std::map<std::string, std::string, std::less<>> current_profiles;  // top-level path -> profile
 };
 
 struct SwapchainState {
@@ -428,7 +743,24 @@ struct SwapchainState {
 struct SpaceState {
   uint64_t session = 0;
   XrReferenceSpaceType type = XR_REFERENCE_SPACE_TYPE_LOCAL;
-  XrPosef offset = mx::kIdentityPose;
+  XrPosef offset = mx::kIdentityPose;  // poseInReferenceSpace or poseInActionSpace
+  uint64_t action = 0;                 // an action space's pose action; 0 for a reference space
+  std::string subaction;               // an action space's subaction path ("" for XR_NULL_PATH)
+};
+
+struct ActionSetRecord {
+  uint64_t instance = 0;
+  std::string name, localized_name;
+  uint32_t priority = 0;
+  bool attached = false;  // to any session: immutable from then on
+};
+
+struct ActionRecord {
+  uint64_t instance = 0;
+  uint64_t set = 0;
+  std::string name, localized_name;
+  XrActionType type = XR_ACTION_TYPE_BOOLEAN_INPUT;
+  std::vector<std::string> subaction_paths;
 };
 
 struct HandTrackerState {
@@ -446,6 +778,8 @@ struct Registry {
   std::unordered_map<uint64_t, SpaceState> spaces;
   std::unordered_map<uint64_t, HandTrackerState> hand_trackers;
   std::unordered_map<uint64_t, SwapchainState> swapchains;
+  std::unordered_map<uint64_t, ActionSetRecord> action_sets;
+  std::unordered_map<uint64_t, ActionRecord> actions;
 };
 
 Registry& registry() {
@@ -477,6 +811,65 @@ void push_state(Registry& reg, uint64_t session_id, XrSessionState state) {
   event.state = state;
   event.time = mx::xr_time_now();
   reg.instances.at(session.instance).events.push_back(event);
+}
+
+// The path atom of `text` (well-formed), creating it if needed.
+XrPath intern_path(InstanceState& state, std::string_view text) {
+  auto it = std::find(state.paths.begin(), state.paths.end(), text);
+  if (it == state.paths.end()) it = state.paths.insert(state.paths.end(), std::string(text));
+  return static_cast<XrPath>(it - state.paths.begin()) + 1;
+}
+// The string of a path atom; nullopt if it is not one (XR_ERROR_PATH_INVALID).
+std::optional<std::string_view> path_string(const InstanceState& state, XrPath path) {
+  if (path == XR_NULL_PATH || path > state.paths.size()) return std::nullopt;
+  return state.paths[path - 1];
+}
+
+bool device_connected(const InstanceState& state, Device device, XrTime time) {
+  const bool present = is_tracker(device) ? state.vive_tracker && state.devices.trackers : state.devices.controllers;
+  if (!present) return false;
+  for (const DisconnectWindow& w : state.devices.disconnects) {
+    if (w.device == device && time >= state.devices.origin + w.from_ns && time < state.devices.origin + w.to_ns) {
+      return false;
+    }
+  }
+  return true;
+}
+
+// Queues XR_TYPE_EVENT_DATA_VIVE_TRACKER_CONNECTED_HTCX for each tracker that
+// connected since the last call. Called whenever an app could notice.
+void refresh_trackers(InstanceState& state, XrTime now) {
+  if (!state.vive_tracker) return;
+  for (std::size_t i = 0; i < 2; ++i) {
+    const bool connected = device_connected(state, i == 0 ? Device::left_tracker : Device::right_tracker, now);
+    if (connected && !state.tracker_seen[i]) {
+      XrViveTrackerPathsHTCX& paths = state.tracker_paths[i];
+      paths = {XR_TYPE_VIVE_TRACKER_PATHS_HTCX, nullptr, intern_path(state, kTrackerPersistentPaths[i]),
+               intern_path(state, kTrackerRoles[i])};
+      XrEventDataViveTrackerConnectedHTCX event{};
+      event.type = XR_TYPE_EVENT_DATA_VIVE_TRACKER_CONNECTED_HTCX;
+      event.paths = &paths;
+      state.events.push_back(event);
+    }
+    state.tracker_seen[i] = connected;
+  }
+}
+
+// A space in LOCAL at `time`; nullopt when it is not tracked (an action space
+// whose action had no active pose binding at the last sync, or whose device
+// is disconnected at `time`). Callers hold the registry mutex.
+std::optional<mx::Motion> space_in_local(const Registry& reg, const SpaceState& space, XrTime time) {
+  if (space.action == 0) return mx::space_in_local(space.type, space.offset, time);
+  const SessionState& session = reg.sessions.at(space.session);
+  const auto action = session.actions.find(space.action);
+  if (action == session.actions.end()) return std::nullopt;
+  const auto value = action->second.values.find(space.subaction);
+  if (value == action->second.values.end() || !value->second.pose_source) return std::nullopt;
+  const Source& source = action->second.sources[*value->second.pose_source];
+  if (!source.device || !device_connected(reg.instances.at(session.instance), *source.device, time)) {
+    return std::nullopt;
+  }
+  return mx::attach(device_motion(*source.device, source.subpath, time), mx::from_xr(space.offset));
 }
 
 // ---------------------------------------------------- vulkan helpers --
@@ -599,7 +992,17 @@ void destroy_session_locked(Registry& reg, uint64_t session_id) {
   }
   if (InstanceState* instance = find(reg.instances, it->second.instance)) {
     const XrSession handle = to_handle<XrSession>(session_id);
-    std::erase_if(instance->events, [&](const auto& e) { return e.session == handle; });
+    std::erase_if(instance->events, [&](const Event& e) {
+      return std::visit(
+          [&](const auto& event) {
+            if constexpr (requires { event.session; }) {
+              return event.session == handle;
+            } else {
+              return false;
+            }
+          },
+          e);
+    });
   }
   reg.sessions.erase(it);
 }
@@ -927,15 +1330,20 @@ XrResult xrCreateInstance(const XrInstanceCreateInfo* info, XrInstance* instance
       case Ext::vulkan_enable2:
         state.vulkan_enable2 = true;
         break;
+      case Ext::vive_tracker:
+        state.vive_tracker = true;
+        break;
       case Ext::none:
         break;
     }
   }
+  state.devices = read_device_config();
 
   Registry& reg = registry();
   std::lock_guard lock(reg.mutex);
   const uint64_t id = reg.next_id++;
-  reg.instances.emplace(id, std::move(state));
+  InstanceState& created = reg.instances.emplace(id, std::move(state)).first->second;
+  refresh_trackers(created, mx::xr_time_now());  // connected events point into `created`
   *instance = to_handle<XrInstance>(id);
   return XR_SUCCESS;
 }
@@ -950,6 +1358,8 @@ XrResult xrDestroyInstance(XrInstance instance) {
     if (session.instance == id) owned.push_back(session_id);
   }
   for (uint64_t session_id : owned) destroy_session_locked(reg, session_id);
+  std::erase_if(reg.actions, [&](const auto& kv) { return kv.second.instance == id; });
+  std::erase_if(reg.action_sets, [&](const auto& kv) { return kv.second.instance == id; });
   reg.instances.erase(id);
   return XR_SUCCESS;
 }
@@ -970,10 +1380,15 @@ XrResult xrPollEvent(XrInstance instance, XrEventDataBuffer* event_data) {
   InstanceState* state = find(reg.instances, id_of(instance));
   if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
   if (event_data == nullptr || event_data->type != XR_TYPE_EVENT_DATA_BUFFER) return XR_ERROR_VALIDATION_FAILURE;
+  refresh_trackers(*state, mx::xr_time_now());
   if (state->events.empty()) return XR_EVENT_UNAVAILABLE;
   // The buffer is a union-like 4000 bytes; the event is copied over its start.
-  static_assert(sizeof(XrEventDataSessionStateChanged) <= sizeof(XrEventDataBuffer));
-  std::memcpy(static_cast<void*>(event_data), &state->events.front(), sizeof(XrEventDataSessionStateChanged));
+  std::visit(
+      [&](const auto& event) {
+        static_assert(sizeof event <= sizeof(XrEventDataBuffer));
+        std::memcpy(static_cast<void*>(event_data), &event, sizeof event);
+      },
+      state->events.front());
   state->events.pop_front();
   return XR_SUCCESS;
 }
@@ -1066,7 +1481,7 @@ XrResult xrCreateSession(XrInstance instance, const XrSessionCreateInfo* info, X
   Registry& reg = registry();
   std::lock_guard lock(reg.mutex);
   const uint64_t instance_id = id_of(instance);
-  const InstanceState* state = find(reg.instances, instance_id);
+  InstanceState* state = find(reg.instances, instance_id);
   if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
   if (info == nullptr || session == nullptr || info->type != XR_TYPE_SESSION_CREATE_INFO || info->createFlags != 0) {
     return XR_ERROR_VALIDATION_FAILURE;
@@ -1097,6 +1512,10 @@ XrResult xrCreateSession(XrInstance instance, const XrSessionCreateInfo* info, X
   if (const char* dir = std::getenv("PROPRIO_MOCK_RUNTIME_CAPTURE_DIR")) session_state.capture_dir = dir;
   session_state.capture_frames =
       env_uint("PROPRIO_MOCK_RUNTIME_CAPTURE_FRAMES", kDefaultCaptureFrames).value_or(kDefaultCaptureFrames);
+  session_state.hand_tracking =
+      hand_tracking_mode() == HandTrackingMode::moving ? HandTrackingMode::moving : HandTrackingMode::fixed;
+  state->devices = read_device_config();
+  refresh_trackers(*state, mx::xr_time_now());
   const uint64_t id = reg.next_id++;
   reg.sessions.emplace(id, std::move(session_state));
   push_state(reg, id, XR_SESSION_STATE_IDLE);
@@ -1139,7 +1558,7 @@ XrResult xrCreateReferenceSpace(XrSession session, const XrReferenceSpaceCreateI
   if (!mx::is_supported_reference_space(info->referenceSpaceType)) return XR_ERROR_REFERENCE_SPACE_UNSUPPORTED;
   if (!is_valid_pose(info->poseInReferenceSpace)) return XR_ERROR_POSE_INVALID;
   const uint64_t id = reg.next_id++;
-  reg.spaces.emplace(id, SpaceState{session_id, info->referenceSpaceType, info->poseInReferenceSpace});
+  reg.spaces.emplace(id, SpaceState{session_id, info->referenceSpaceType, info->poseInReferenceSpace, 0, {}});
   *space = to_handle<XrSpace>(id);
   return XR_SUCCESS;
 }
@@ -1162,28 +1581,29 @@ XrResult xrDestroySpace(XrSpace space) {
   return reg.spaces.erase(id_of(space)) == 1 ? XR_SUCCESS : XR_ERROR_HANDLE_INVALID;
 }
 
+// Action spaces are located only while tracked (see space_in_local); an
+// untracked space, or base, gives no flags at all.
 XrResult xrLocateSpace(XrSpace space, XrSpace base_space, XrTime time, XrSpaceLocation* location) {
-  SpaceState a, b;
-  {
-    Registry& reg = registry();
-    std::lock_guard lock(reg.mutex);
-    const SpaceState* pa = find(reg.spaces, id_of(space));
-    const SpaceState* pb = find(reg.spaces, id_of(base_space));
-    if (pa == nullptr || pb == nullptr) return XR_ERROR_HANDLE_INVALID;
-    a = *pa;
-    b = *pb;
-  }
-  if (a.session != b.session) return XR_ERROR_VALIDATION_FAILURE;  // must share a session
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const SpaceState* a = find(reg.spaces, id_of(space));
+  const SpaceState* b = find(reg.spaces, id_of(base_space));
+  if (a == nullptr || b == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (a->session != b->session) return XR_ERROR_VALIDATION_FAILURE;  // must share a session
   if (location == nullptr || location->type != XR_TYPE_SPACE_LOCATION) return XR_ERROR_VALIDATION_FAILURE;
   if (time <= 0) return XR_ERROR_TIME_INVALID;
 
-  const mx::Located located = mx::locate(a.type, a.offset, b.type, b.offset, time);
-  location->locationFlags = kAllLocationFlags;
-  location->pose = located.pose;
+  const std::optional<mx::Motion> a_local = space_in_local(reg, *a, time);
+  const std::optional<mx::Motion> b_local = space_in_local(reg, *b, time);
+  const bool tracked = a_local && b_local;
+  const mx::Located located = tracked ? mx::to_xr(mx::relative_motion(*a_local, *b_local)) : mx::Located{};
+  location->locationFlags = tracked ? kAllLocationFlags : 0;
+  location->pose = tracked ? located.pose : mx::kIdentityPose;
   for (auto* s = static_cast<XrBaseOutStructure*>(location->next); s != nullptr; s = s->next) {
     if (s->type == XR_TYPE_SPACE_VELOCITY) {
       auto* velocity = reinterpret_cast<XrSpaceVelocity*>(s);
-      velocity->velocityFlags = XR_SPACE_VELOCITY_LINEAR_VALID_BIT | XR_SPACE_VELOCITY_ANGULAR_VALID_BIT;
+      velocity->velocityFlags =
+          tracked ? XR_SPACE_VELOCITY_LINEAR_VALID_BIT | XR_SPACE_VELOCITY_ANGULAR_VALID_BIT : 0;
       velocity->linearVelocity = located.linear_velocity;
       velocity->angularVelocity = located.angular_velocity;
     }
@@ -1350,9 +1770,7 @@ XrResult xrStringToPath(XrInstance instance, const char* path_string, XrPath* pa
   if (path_string == nullptr || path == nullptr) return XR_ERROR_VALIDATION_FAILURE;
   const std::string_view text(path_string, strnlen(path_string, XR_MAX_PATH_LENGTH));
   if (!is_well_formed_path(text)) return XR_ERROR_PATH_FORMAT_INVALID;
-  auto it = std::find(state->paths.begin(), state->paths.end(), text);
-  if (it == state->paths.end()) it = state->paths.insert(state->paths.end(), std::string(text));
-  *path = static_cast<XrPath>(it - state->paths.begin()) + 1;
+  *path = intern_path(*state, text);
   return XR_SUCCESS;
 }
 
@@ -1416,36 +1834,36 @@ XrResult xrEnumerateViewConfigurationViews(XrInstance instance, XrSystemId syste
   });
 }
 
-// Each eye is the VIEW space moved -/+ kHalfIpdM along its own x axis.
+// Each eye is the VIEW space moved -/+ kHalfIpdM along its own x axis. In an
+// untracked action space the views have identity poses and no flags.
 XrResult xrLocateViews(XrSession session, const XrViewLocateInfo* info, XrViewState* view_state, uint32_t capacity,
                        uint32_t* count, XrView* views) {
-  SpaceState base;
-  {
-    Registry& reg = registry();
-    std::lock_guard lock(reg.mutex);
-    if (find(reg.sessions, id_of(session)) == nullptr) return XR_ERROR_HANDLE_INVALID;
-    if (info == nullptr || info->type != XR_TYPE_VIEW_LOCATE_INFO) return XR_ERROR_VALIDATION_FAILURE;
-    const SpaceState* space = find(reg.spaces, id_of(info->space));
-    if (space == nullptr) return XR_ERROR_HANDLE_INVALID;
-    if (space->session != id_of(session)) return XR_ERROR_VALIDATION_FAILURE;
-    base = *space;
-  }
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  if (find(reg.sessions, id_of(session)) == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_VIEW_LOCATE_INFO) return XR_ERROR_VALIDATION_FAILURE;
+  const SpaceState* space = find(reg.spaces, id_of(info->space));
+  if (space == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (space->session != id_of(session)) return XR_ERROR_VALIDATION_FAILURE;
   if (info->viewConfigurationType != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) {
     return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
   }
   if (view_state == nullptr || view_state->type != XR_TYPE_VIEW_STATE) return XR_ERROR_VALIDATION_FAILURE;
   if (info->displayTime <= 0) return XR_ERROR_TIME_INVALID;
+  const std::optional<mx::Motion> base = space_in_local(reg, *space, info->displayTime);
   const XrResult result = two_call(capacity, count, views, kViewCount, [&](XrView& view, uint32_t i) {
     if (view.type != XR_TYPE_VIEW) return XR_ERROR_VALIDATION_FAILURE;
     XrPosef eye = mx::kIdentityPose;
     eye.position.x = i == 0 ? -kHalfIpdM : kHalfIpdM;
-    view.pose = mx::locate(XR_REFERENCE_SPACE_TYPE_VIEW, eye, base.type, base.offset, info->displayTime).pose;
+    const mx::Motion eye_in_local = mx::space_in_local(XR_REFERENCE_SPACE_TYPE_VIEW, eye, info->displayTime);
+    view.pose = base ? mx::to_xr(mx::relative_motion(eye_in_local, *base).pose) : mx::kIdentityPose;
     view.fov = kFov;
     return XR_SUCCESS;
   });
   if (XR_SUCCEEDED(result)) {
-    view_state->viewStateFlags = XR_VIEW_STATE_ORIENTATION_VALID_BIT | XR_VIEW_STATE_POSITION_VALID_BIT |
-                                 XR_VIEW_STATE_ORIENTATION_TRACKED_BIT | XR_VIEW_STATE_POSITION_TRACKED_BIT;
+    view_state->viewStateFlags = base ? XR_VIEW_STATE_ORIENTATION_VALID_BIT | XR_VIEW_STATE_POSITION_VALID_BIT |
+                                            XR_VIEW_STATE_ORIENTATION_TRACKED_BIT | XR_VIEW_STATE_POSITION_TRACKED_BIT
+                                      : 0;
   }
   return result;
 }
@@ -1781,7 +2199,8 @@ XrResult xrCreateVulkanDeviceKHR(XrInstance instance, const XrVulkanDeviceCreate
   }
   if (info->systemId != kSystemId) return XR_ERROR_SYSTEM_INVALID;
   if (info->vulkanPhysicalDevice == VK_NULL_HANDLE || info->vulkanPhysicalDevice != state->graphics_device) {
-    if (log_calls()) warn("xrCreateVulkanDeviceKHR: the VkPhysicalDevice is not what xrGetVulkanGraphicsDevice2KHR returned");
+    if (log_calls())
+      warn("xrCreateVulkanDeviceKHR: the VkPhysicalDevice is not what xrGetVulkanGraphicsDevice2KHR returned");
     return XR_ERROR_GRAPHICS_DEVICE_INVALID;
   }
   const VkInstance vk_instance = state->graphics_device_instance;
@@ -1861,16 +2280,14 @@ XrResult xrDestroyHandTrackerEXT(XrHandTrackerEXT hand_tracker) {
 
 XrResult xrLocateHandJointsEXT(XrHandTrackerEXT hand_tracker, const XrHandJointsLocateInfoEXT* info,
                                XrHandJointLocationsEXT* locations) {
-  {
-    Registry& reg = registry();
-    std::lock_guard lock(reg.mutex);
-    const HandTrackerState* tracker = find(reg.hand_trackers, id_of(hand_tracker));
-    if (tracker == nullptr) return XR_ERROR_HANDLE_INVALID;
-    if (info == nullptr || info->type != XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT) return XR_ERROR_VALIDATION_FAILURE;
-    const SpaceState* base = find(reg.spaces, id_of(info->baseSpace));
-    if (base == nullptr) return XR_ERROR_HANDLE_INVALID;
-    if (base->session != tracker->session) return XR_ERROR_VALIDATION_FAILURE;
-  }
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const HandTrackerState* tracker = find(reg.hand_trackers, id_of(hand_tracker));
+  if (tracker == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT) return XR_ERROR_VALIDATION_FAILURE;
+  const SpaceState* base = find(reg.spaces, id_of(info->baseSpace));
+  if (base == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (base->session != tracker->session) return XR_ERROR_VALIDATION_FAILURE;
   if (locations == nullptr || locations->type != XR_TYPE_HAND_JOINT_LOCATIONS_EXT ||
       locations->jointCount != XR_HAND_JOINT_COUNT_EXT || locations->jointLocations == nullptr) {
     return XR_ERROR_VALIDATION_FAILURE;
@@ -1885,21 +2302,649 @@ XrResult xrLocateHandJointsEXT(XrHandTrackerEXT hand_tracker, const XrHandJoints
       (velocities->jointCount != XR_HAND_JOINT_COUNT_EXT || velocities->jointVelocities == nullptr)) {
     return XR_ERROR_VALIDATION_FAILURE;
   }
-  // The fixed, recognisable native pose (mock_motion.hpp), whatever the base space.
-  locations->isActive = XR_TRUE;
+  constexpr XrSpaceVelocityFlags kBothVelocities =
+      XR_SPACE_VELOCITY_LINEAR_VALID_BIT | XR_SPACE_VELOCITY_ANGULAR_VALID_BIT;
+
+  if (reg.sessions.at(tracker->session).hand_tracking == HandTrackingMode::fixed) {
+    // The fixed, recognisable native pose (mock_motion.hpp), whatever the base space.
+    locations->isActive = XR_TRUE;
+    for (uint32_t i = 0; i < XR_HAND_JOINT_COUNT_EXT; ++i) {
+      XrHandJointLocationEXT& joint = locations->jointLocations[i];
+      joint.locationFlags = kAllLocationFlags;
+      joint.pose = {{0.0f, 0.0f, 0.0f, 1.0f}, mx::kNativeJointPosition};
+      joint.radius = mx::kNativeJointRadius;
+      if (velocities != nullptr) {
+        XrHandJointVelocityEXT& v = velocities->jointVelocities[i];
+        v.velocityFlags = kBothVelocities;
+        v.linearVelocity = {0.0f, 0.0f, 0.0f};
+        v.angularVelocity = {0.0f, 0.0f, 0.0f};
+      }
+    }
+    return XR_SUCCESS;
+  }
+
+  // "moving": the analytic hand, lost during its window (or in an untracked base).
+  const mx::Hand hand = tracker->hand == XR_HAND_LEFT_EXT ? mx::Hand::left : mx::Hand::right;
+  const std::optional<mx::Motion> base_in_local = space_in_local(reg, *base, info->time);
+  const bool active = base_in_local && mx::native_hand_tracked(hand, info->time);
+  locations->isActive = active ? XR_TRUE : XR_FALSE;
   for (uint32_t i = 0; i < XR_HAND_JOINT_COUNT_EXT; ++i) {
     XrHandJointLocationEXT& joint = locations->jointLocations[i];
-    joint.locationFlags = kAllLocationFlags;
-    joint.pose = {{0.0f, 0.0f, 0.0f, 1.0f}, mx::kNativeJointPosition};
-    joint.radius = mx::kNativeJointRadius;
-    if (velocities != nullptr) {
-      XrHandJointVelocityEXT& v = velocities->jointVelocities[i];
-      v.velocityFlags = XR_SPACE_VELOCITY_LINEAR_VALID_BIT | XR_SPACE_VELOCITY_ANGULAR_VALID_BIT;
-      v.linearVelocity = {0.0f, 0.0f, 0.0f};
-      v.angularVelocity = {0.0f, 0.0f, 0.0f};
+    XrHandJointVelocityEXT* velocity = velocities != nullptr ? &velocities->jointVelocities[i] : nullptr;
+    if (!active) {
+      joint.locationFlags = 0;
+      joint.pose = mx::kIdentityPose;
+      joint.radius = 0.0f;
+      if (velocity != nullptr) *velocity = {0, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}};
+      continue;
     }
+    const mx::Located located = mx::to_xr(
+        mx::relative_motion(mx::native_joint(hand, static_cast<XrHandJointEXT>(i), info->time), *base_in_local));
+    joint.locationFlags = kAllLocationFlags;
+    joint.pose = located.pose;
+    joint.radius = static_cast<float>(mx::kNativeJointsRight[i].radius);
+    if (velocity != nullptr) *velocity = {kBothVelocities, located.linear_velocity, located.angular_velocity};
   }
   return XR_SUCCESS;
+}
+
+// ---- actions ----
+// A name in a fixed-size array; nullopt when it is not NUL-terminated there.
+std::optional<std::string_view> fixed_string(const char* array, std::size_t size) {
+  const std::size_t n = strnlen(array, size);
+  if (n == size) return std::nullopt;
+  return std::string_view(array, n);
+}
+
+// Action and action set names must be well-formed path components.
+bool is_valid_name(std::string_view name) {
+  return !name.empty() && name.find('/') == std::string_view::npos && is_well_formed_path("/" + std::string(name));
+}
+
+bool is_known_top_level(const InstanceState& state, std::string_view path) {
+  for (std::string_view top : kHandPaths) {
+    if (path == top) return true;
+  }
+  for (std::string_view top : kOtherTopLevelPaths) {
+    if (path == top) return true;
+  }
+  if (state.vive_tracker) {
+    for (std::string_view top : kTrackerRolePaths) {
+      if (path == top) return true;
+    }
+  }
+  return false;
+}
+
+// The interaction profile an instance may use, by path.
+const Profile* find_profile(const InstanceState& state, std::string_view path) {
+  for (const Profile& profile : kProfiles) {
+    if (profile.path == path && state.enabled(profile.ext)) return &profile;
+  }
+  return nullptr;
+}
+
+XrResult xrCreateActionSet(XrInstance instance, const XrActionSetCreateInfo* info, XrActionSet* action_set) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t instance_id = id_of(instance);
+  if (find(reg.instances, instance_id) == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || action_set == nullptr || info->type != XR_TYPE_ACTION_SET_CREATE_INFO) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  const auto name = fixed_string(info->actionSetName, XR_MAX_ACTION_SET_NAME_SIZE);
+  const auto localized = fixed_string(info->localizedActionSetName, XR_MAX_LOCALIZED_ACTION_SET_NAME_SIZE);
+  if (!name || !localized) return XR_ERROR_VALIDATION_FAILURE;
+  if (!is_valid_name(*name)) return XR_ERROR_NAME_INVALID;
+  if (localized->empty()) return XR_ERROR_LOCALIZED_NAME_INVALID;
+  for (const auto& [id, set] : reg.action_sets) {
+    if (set.instance != instance_id) continue;
+    if (set.name == *name) return XR_ERROR_NAME_DUPLICATED;
+    if (set.localized_name == *localized) return XR_ERROR_LOCALIZED_NAME_DUPLICATED;
+  }
+  const uint64_t id = reg.next_id++;
+  reg.action_sets.emplace(id, ActionSetRecord{instance_id, std::string(*name), std::string(*localized),
+                                              info->priority, false});
+  *action_set = to_handle<XrActionSet>(id);
+  return XR_SUCCESS;
+}
+
+// Its actions go with it. Sessions keep what they attached, and action spaces
+// keep working, as the spec asks.
+XrResult xrDestroyActionSet(XrActionSet action_set) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t id = id_of(action_set);
+  if (reg.action_sets.erase(id) != 1) return XR_ERROR_HANDLE_INVALID;
+  std::erase_if(reg.actions, [&](const auto& kv) { return kv.second.set == id; });
+  return XR_SUCCESS;
+}
+
+XrResult xrCreateAction(XrActionSet action_set, const XrActionCreateInfo* info, XrAction* action) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t set_id = id_of(action_set);
+  const ActionSetRecord* set = find(reg.action_sets, set_id);
+  if (set == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || action == nullptr || info->type != XR_TYPE_ACTION_CREATE_INFO ||
+      (info->countSubactionPaths > 0 && info->subactionPaths == nullptr)) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  switch (info->actionType) {
+    case XR_ACTION_TYPE_BOOLEAN_INPUT:
+    case XR_ACTION_TYPE_FLOAT_INPUT:
+    case XR_ACTION_TYPE_VECTOR2F_INPUT:
+    case XR_ACTION_TYPE_POSE_INPUT:
+    case XR_ACTION_TYPE_VIBRATION_OUTPUT:
+      break;
+    default:
+      return XR_ERROR_VALIDATION_FAILURE;
+  }
+  const auto name = fixed_string(info->actionName, XR_MAX_ACTION_NAME_SIZE);
+  const auto localized = fixed_string(info->localizedActionName, XR_MAX_LOCALIZED_ACTION_NAME_SIZE);
+  if (!name || !localized) return XR_ERROR_VALIDATION_FAILURE;
+  if (set->attached) return XR_ERROR_ACTIONSETS_ALREADY_ATTACHED;
+  if (!is_valid_name(*name)) return XR_ERROR_NAME_INVALID;
+  if (localized->empty()) return XR_ERROR_LOCALIZED_NAME_INVALID;
+  for (const auto& [id, other] : reg.actions) {
+    if (other.set != set_id) continue;
+    if (other.name == *name) return XR_ERROR_NAME_DUPLICATED;
+    if (other.localized_name == *localized) return XR_ERROR_LOCALIZED_NAME_DUPLICATED;
+  }
+  const InstanceState& instance = reg.instances.at(set->instance);
+  std::vector<std::string> subaction_paths;
+  for (uint32_t i = 0; i < info->countSubactionPaths; ++i) {
+    const auto path = path_string(instance, info->subactionPaths[i]);
+    if (!path) return XR_ERROR_PATH_INVALID;
+    if (!is_known_top_level(instance, *path)) return XR_ERROR_PATH_UNSUPPORTED;
+    if (std::find(subaction_paths.begin(), subaction_paths.end(), *path) != subaction_paths.end()) {
+      return XR_ERROR_PATH_UNSUPPORTED;  // listed twice
+    }
+    subaction_paths.emplace_back(*path);
+  }
+  const uint64_t id = reg.next_id++;
+  reg.actions.emplace(id, ActionRecord{set->instance, set_id, std::string(*name), std::string(*localized),
+                                       info->actionType, std::move(subaction_paths)});
+  *action = to_handle<XrAction>(id);
+  return XR_SUCCESS;
+}
+
+XrResult xrDestroyAction(XrAction action) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  return reg.actions.erase(id_of(action)) == 1 ? XR_SUCCESS : XR_ERROR_HANDLE_INVALID;
+}
+
+// Strict: only the profiles this runtime has devices for (the spec's other
+// profiles are refused too), and a later call for a profile replaces its
+// earlier suggestion. Bindings whose input does not suit the action's type
+// are accepted and never bind (the spec defines no error for them).
+XrResult xrSuggestInteractionProfileBindings(XrInstance instance, const XrInteractionProfileSuggestedBinding* info) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t instance_id = id_of(instance);
+  InstanceState* state = find(reg.instances, instance_id);
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING ||
+      info->countSuggestedBindings == 0 || info->suggestedBindings == nullptr) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  const auto profile_path = path_string(*state, info->interactionProfile);
+  if (!profile_path) return XR_ERROR_PATH_INVALID;
+  const Profile* profile = find_profile(*state, *profile_path);
+  if (profile == nullptr) return XR_ERROR_PATH_UNSUPPORTED;
+  std::vector<SuggestedBinding> bindings;
+  bool attached = false;
+  for (uint32_t i = 0; i < info->countSuggestedBindings; ++i) {
+    const XrActionSuggestedBinding& binding = info->suggestedBindings[i];
+    const ActionRecord* action = find(reg.actions, id_of(binding.action));
+    if (action == nullptr) return XR_ERROR_HANDLE_INVALID;
+    if (action->instance != instance_id) return XR_ERROR_VALIDATION_FAILURE;
+    const auto path = path_string(*state, binding.binding);
+    if (!path) return XR_ERROR_PATH_INVALID;
+    if (!split_binding(*profile, *path)) return XR_ERROR_PATH_UNSUPPORTED;
+    attached |= reg.action_sets.at(action->set).attached;
+    bindings.push_back({id_of(binding.action), std::string(*path)});
+  }
+  // The spec's rule: refused once the set of any action named was attached.
+  if (attached) return XR_ERROR_ACTIONSETS_ALREADY_ATTACHED;
+  state->suggestions.insert_or_assign(std::string(*profile_path), std::move(bindings));
+  return XR_SUCCESS;
+}
+
+XrResult xrAttachSessionActionSets(XrSession session, const XrSessionActionSetsAttachInfo* info) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  SessionState* state = find(reg.sessions, id_of(session));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_SESSION_ACTION_SETS_ATTACH_INFO || info->countActionSets == 0 ||
+      info->actionSets == nullptr) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  for (uint32_t i = 0; i < info->countActionSets; ++i) {
+    const ActionSetRecord* set = find(reg.action_sets, id_of(info->actionSets[i]));
+    if (set == nullptr) return XR_ERROR_HANDLE_INVALID;
+    if (set->instance != state->instance) return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (state->attached) return XR_ERROR_ACTIONSETS_ALREADY_ATTACHED;
+
+  const InstanceState& instance = reg.instances.at(state->instance);
+  state->attached = true;
+  for (uint32_t i = 0; i < info->countActionSets; ++i) {
+    const uint64_t set_id = id_of(info->actionSets[i]);
+    ActionSetRecord& set = reg.action_sets.at(set_id);
+    set.attached = true;
+    state->attached_sets.emplace(set_id, set.priority);
+  }
+  for (const auto& [action_id, record] : reg.actions) {
+    const auto set = state->attached_sets.find(record.set);
+    if (set == state->attached_sets.end()) continue;
+    AttachedAction attached{record.set, set->second, record.type, record.subaction_paths, {}, {}};
+    for (const auto& [profile_path, bindings] : instance.suggestions) {
+      const Profile& profile = *find_profile(instance, profile_path);
+      for (const SuggestedBinding& binding : bindings) {
+        if (binding.action != action_id) continue;
+        state->suggested_profiles.insert(profile_path);
+        const BindingPath split = *split_binding(profile, binding.path);
+        const InputSource* input = resolve_input(profile, split.subpath, record.type);
+        if (input == nullptr) continue;
+        attached.sources.push_back({profile.path, split.top_level, input->subpath, input->kind,
+                                    std::string(split.top_level) + "/" + std::string(input->subpath),
+                                    device_at(profile.path, split.top_level)});
+      }
+    }
+    state->actions.emplace(action_id, std::move(attached));
+  }
+  return XR_SUCCESS;
+}
+
+// Input is sampled at the call's own time. A source is live when its set is
+// active for its top-level path, the session is focused and its device is
+// connected; a live source is dropped when an active set of higher priority
+// binds the same input source. Then, per subaction path ("" for all): booleans
+// OR, floats and vectors take the largest magnitude, poses the first source
+// in suggestion order.
+XrResult xrSyncActions(XrSession session, const XrActionsSyncInfo* info) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t session_id = id_of(session);
+  SessionState* state = find(reg.sessions, session_id);
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_ACTIONS_SYNC_INFO ||
+      (info->countActiveActionSets > 0 && info->activeActionSets == nullptr)) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  InstanceState& instance = reg.instances.at(state->instance);
+  std::unordered_map<uint64_t, std::vector<std::string>> filters;  // set -> subaction paths ("" for all)
+  for (uint32_t i = 0; i < info->countActiveActionSets; ++i) {
+    const XrActiveActionSet& active = info->activeActionSets[i];
+    const uint64_t set_id = id_of(active.actionSet);
+    if (find(reg.action_sets, set_id) == nullptr) return XR_ERROR_HANDLE_INVALID;
+    if (!state->attached_sets.contains(set_id)) return XR_ERROR_ACTIONSET_NOT_ATTACHED;
+    std::string filter;
+    if (active.subactionPath != XR_NULL_PATH) {
+      const auto path = path_string(instance, active.subactionPath);
+      if (!path) return XR_ERROR_PATH_INVALID;
+      const bool declared = std::any_of(state->actions.begin(), state->actions.end(), [&](const auto& kv) {
+        const AttachedAction& a = kv.second;
+        return a.set == set_id &&
+               std::find(a.subaction_paths.begin(), a.subaction_paths.end(), *path) != a.subaction_paths.end();
+      });
+      if (!declared) return XR_ERROR_PATH_UNSUPPORTED;
+      filter = *path;
+    }
+    filters[set_id].push_back(std::move(filter));
+  }
+
+  const XrTime now = mx::xr_time_now();
+  refresh_trackers(instance, now);
+  const bool focused = state->state == XR_SESSION_STATE_FOCUSED;
+  std::unordered_map<uint64_t, std::vector<bool>> live;
+  std::map<std::string, uint32_t, std::less<>> top_priority;  // input source path -> highest live priority
+  for (const auto& [action_id, action] : state->actions) {
+    std::vector<bool>& flags = live[action_id];
+    const auto filter = filters.find(action.set);
+    for (const Source& source : action.sources) {
+      const bool on = focused && filter != filters.end() &&
+                      std::any_of(filter->second.begin(), filter->second.end(),
+                                  [&](const std::string& f) { return f.empty() || f == source.top_level; }) &&
+                      source.device && device_connected(instance, *source.device, now);
+      flags.push_back(on);
+      if (on) {
+        auto [it, inserted] = top_priority.try_emplace(source.path, action.priority);
+        if (!inserted) it->second = std::max(it->second, action.priority);
+      }
+    }
+  }
+  for (auto& [action_id, action] : state->actions) {
+    std::vector<bool>& flags = live[action_id];
+    for (std::size_t i = 0; i < flags.size(); ++i) {
+      if (flags[i] && top_priority.at(action.sources[i].path) > action.priority) flags[i] = false;
+    }
+    std::vector<std::string> keys{""};
+    keys.insert(keys.end(), action.subaction_paths.begin(), action.subaction_paths.end());
+    for (const std::string& key : keys) {
+      ActionValue& value = action.values[key];
+      ActionValue next;
+      for (std::size_t i = 0; i < flags.size(); ++i) {
+        const Source& source = action.sources[i];
+        if (!flags[i] || (!key.empty() && source.top_level != key)) continue;
+        const float v = static_cast<float>(source_value(source, now));
+        if (action.type == XR_ACTION_TYPE_BOOLEAN_INPUT) {
+          if (v > 0.5f) next.x = 1.0f;
+        } else if (std::abs(v) > std::abs(next.x)) {
+          next.x = v;  // float; a vector2 source reads (0, 0)
+        }
+        if (action.type == XR_ACTION_TYPE_POSE_INPUT && !next.pose_source) next.pose_source = i;
+        next.active = true;
+      }
+      if (next.active) {
+        next.changed = next.x != value.x || next.y != value.y;
+        next.last_change = next.changed ? now : value.last_change;
+      }
+      value = next;
+    }
+  }
+
+  // The current profile of each device's top-level path; a change is announced.
+  bool profiles_changed = false;
+  for (const DeviceSlot& slot : kDeviceSlots) {
+    const bool bound = device_connected(instance, slot.device, now) && state->suggested_profiles.contains(slot.profile);
+    const std::string profile = bound ? std::string(slot.profile) : std::string();
+    std::string& current = state->current_profiles[std::string(slot.top_level)];
+    profiles_changed |= current != profile;
+    current = profile;
+  }
+  if (profiles_changed) {
+    XrEventDataInteractionProfileChanged event{};
+    event.type = XR_TYPE_EVENT_DATA_INTERACTION_PROFILE_CHANGED;
+    event.session = session;
+    instance.events.push_back(event);
+  }
+  return focused ? XR_SUCCESS : XR_SESSION_NOT_FOCUSED;
+}
+
+XrResult xrGetCurrentInteractionProfile(XrSession session, XrPath top_level_user_path,
+                                        XrInteractionProfileState* interaction_profile) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const SessionState* state = find(reg.sessions, id_of(session));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (interaction_profile == nullptr || interaction_profile->type != XR_TYPE_INTERACTION_PROFILE_STATE) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (!state->attached) return XR_ERROR_ACTIONSET_NOT_ATTACHED;
+  InstanceState& instance = reg.instances.at(state->instance);
+  const auto path = path_string(instance, top_level_user_path);
+  if (!path) return XR_ERROR_PATH_INVALID;
+  if (!is_known_top_level(instance, *path)) return XR_ERROR_PATH_UNSUPPORTED;
+  const auto current = state->current_profiles.find(*path);
+  interaction_profile->interactionProfile = current == state->current_profiles.end() || current->second.empty()
+                                                ? XR_NULL_PATH
+                                                : intern_path(instance, current->second);
+  return XR_SUCCESS;
+}
+
+// The checks every call naming an action of a session shares; on success
+// `out` is the session's attached action and `key` its subaction path.
+XrResult attached_action(Registry& reg, const SessionState& session, XrAction action, XrPath subaction,
+                         std::initializer_list<XrActionType> types, AttachedAction*& out, std::string& key) {
+  const uint64_t action_id = id_of(action);
+  const ActionRecord* record = find(reg.actions, action_id);
+  if (record == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (record->instance != session.instance) return XR_ERROR_VALIDATION_FAILURE;
+  if (std::find(types.begin(), types.end(), record->type) == types.end()) return XR_ERROR_ACTION_TYPE_MISMATCH;
+  if (!session.attached_sets.contains(record->set)) return XR_ERROR_ACTIONSET_NOT_ATTACHED;
+  key.clear();
+  if (subaction != XR_NULL_PATH) {
+    const auto path = path_string(reg.instances.at(session.instance), subaction);
+    if (!path) return XR_ERROR_PATH_INVALID;
+    if (std::find(record->subaction_paths.begin(), record->subaction_paths.end(), *path) ==
+        record->subaction_paths.end()) {
+      return XR_ERROR_PATH_UNSUPPORTED;
+    }
+    key = *path;
+  }
+  out = &const_cast<SessionState&>(session).actions.at(action_id);
+  return XR_SUCCESS;
+}
+
+// The state of the last sync (all zero before the first one).
+template <class State, class Fill>
+XrResult get_action_state(XrSession session, const XrActionStateGetInfo* info, State* out, XrStructureType type,
+                          XrActionType action_type, Fill fill) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const SessionState* state = find(reg.sessions, id_of(session));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_ACTION_STATE_GET_INFO || out == nullptr || out->type != type) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  AttachedAction* action = nullptr;
+  std::string key;
+  if (const XrResult r = attached_action(reg, *state, info->action, info->subactionPath, {action_type}, action, key);
+      XR_FAILED(r)) {
+    return r;
+  }
+  const auto value = action->values.find(key);
+  fill(*out, value == action->values.end() ? ActionValue{} : value->second);
+  return XR_SUCCESS;
+}
+
+XrResult xrGetActionStateBoolean(XrSession session, const XrActionStateGetInfo* info, XrActionStateBoolean* state) {
+  return get_action_state(session, info, state, XR_TYPE_ACTION_STATE_BOOLEAN, XR_ACTION_TYPE_BOOLEAN_INPUT,
+                          [](XrActionStateBoolean& s, const ActionValue& v) {
+                            s.currentState = v.x != 0.0f ? XR_TRUE : XR_FALSE;
+                            s.changedSinceLastSync = v.changed ? XR_TRUE : XR_FALSE;
+                            s.lastChangeTime = v.last_change;
+                            s.isActive = v.active ? XR_TRUE : XR_FALSE;
+                          });
+}
+
+XrResult xrGetActionStateFloat(XrSession session, const XrActionStateGetInfo* info, XrActionStateFloat* state) {
+  return get_action_state(session, info, state, XR_TYPE_ACTION_STATE_FLOAT, XR_ACTION_TYPE_FLOAT_INPUT,
+                          [](XrActionStateFloat& s, const ActionValue& v) {
+                            s.currentState = v.x;
+                            s.changedSinceLastSync = v.changed ? XR_TRUE : XR_FALSE;
+                            s.lastChangeTime = v.last_change;
+                            s.isActive = v.active ? XR_TRUE : XR_FALSE;
+                          });
+}
+
+XrResult xrGetActionStateVector2f(XrSession session, const XrActionStateGetInfo* info,
+                                  XrActionStateVector2f* state) {
+  return get_action_state(session, info, state, XR_TYPE_ACTION_STATE_VECTOR2F, XR_ACTION_TYPE_VECTOR2F_INPUT,
+                          [](XrActionStateVector2f& s, const ActionValue& v) {
+                            s.currentState = {v.x, v.y};
+                            s.changedSinceLastSync = v.changed ? XR_TRUE : XR_FALSE;
+                            s.lastChangeTime = v.last_change;
+                            s.isActive = v.active ? XR_TRUE : XR_FALSE;
+                          });
+}
+
+XrResult xrGetActionStatePose(XrSession session, const XrActionStateGetInfo* info, XrActionStatePose* state) {
+  return get_action_state(
+      session, info, state, XR_TYPE_ACTION_STATE_POSE, XR_ACTION_TYPE_POSE_INPUT,
+      [](XrActionStatePose& s, const ActionValue& v) { s.isActive = v.active ? XR_TRUE : XR_FALSE; });
+}
+
+// Allowed before xrAttachSessionActionSets; the space is tracked only while
+// its action has an active pose binding (xrSyncActions) on a connected device.
+XrResult xrCreateActionSpace(XrSession session, const XrActionSpaceCreateInfo* info, XrSpace* space) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const uint64_t session_id = id_of(session);
+  const SessionState* state = find(reg.sessions, session_id);
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || space == nullptr || info->type != XR_TYPE_ACTION_SPACE_CREATE_INFO) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  const ActionRecord* action = find(reg.actions, id_of(info->action));
+  if (action == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (action->instance != state->instance) return XR_ERROR_VALIDATION_FAILURE;
+  if (action->type != XR_ACTION_TYPE_POSE_INPUT) return XR_ERROR_ACTION_TYPE_MISMATCH;
+  std::string subaction;
+  if (info->subactionPath != XR_NULL_PATH) {
+    const auto path = path_string(reg.instances.at(state->instance), info->subactionPath);
+    if (!path) return XR_ERROR_PATH_INVALID;
+    if (std::find(action->subaction_paths.begin(), action->subaction_paths.end(), *path) ==
+        action->subaction_paths.end()) {
+      return XR_ERROR_PATH_UNSUPPORTED;
+    }
+    subaction = *path;
+  }
+  if (!is_valid_pose(info->poseInActionSpace)) return XR_ERROR_POSE_INVALID;
+  const uint64_t id = reg.next_id++;
+  reg.spaces.emplace(id, SpaceState{session_id, XR_REFERENCE_SPACE_TYPE_LOCAL, info->poseInActionSpace,
+                                    id_of(info->action), std::move(subaction)});
+  *space = to_handle<XrSpace>(id);
+  return XR_SUCCESS;
+}
+
+// The action's sources in the current interaction profiles (as of the last sync).
+XrResult xrEnumerateBoundSourcesForAction(XrSession session, const XrBoundSourcesForActionEnumerateInfo* info,
+                                          uint32_t capacity, uint32_t* count, XrPath* sources) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const SessionState* state = find(reg.sessions, id_of(session));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_BOUND_SOURCES_FOR_ACTION_ENUMERATE_INFO) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  AttachedAction* action = nullptr;
+  std::string key;
+  static constexpr std::initializer_list<XrActionType> kAnyType{
+      XR_ACTION_TYPE_BOOLEAN_INPUT, XR_ACTION_TYPE_FLOAT_INPUT, XR_ACTION_TYPE_VECTOR2F_INPUT,
+      XR_ACTION_TYPE_POSE_INPUT, XR_ACTION_TYPE_VIBRATION_OUTPUT};
+  if (const XrResult r = attached_action(reg, *state, info->action, XR_NULL_PATH, kAnyType, action, key);
+      XR_FAILED(r)) {
+    return r;
+  }
+  InstanceState& instance = reg.instances.at(state->instance);
+  std::vector<XrPath> bound;
+  for (const Source& source : action->sources) {
+    const auto current = state->current_profiles.find(source.top_level);
+    if (current == state->current_profiles.end() || current->second != source.profile) continue;
+    const XrPath path = intern_path(instance, source.path);
+    if (std::find(bound.begin(), bound.end(), path) == bound.end()) bound.push_back(path);
+  }
+  return two_call(capacity, count, sources, static_cast<uint32_t>(bound.size()), [&](XrPath& p, uint32_t i) {
+    p = bound[i];
+    return XR_SUCCESS;
+  });
+}
+
+// "Left Hand Simple Controller Select Click", or the parts asked for.
+XrResult xrGetInputSourceLocalizedName(XrSession session, const XrInputSourceLocalizedNameGetInfo* info,
+                                       uint32_t capacity, uint32_t* count, char* buffer) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const SessionState* state = find(reg.sessions, id_of(session));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  constexpr XrInputSourceLocalizedNameFlags kAllComponents = XR_INPUT_SOURCE_LOCALIZED_NAME_USER_PATH_BIT |
+                                                             XR_INPUT_SOURCE_LOCALIZED_NAME_INTERACTION_PROFILE_BIT |
+                                                             XR_INPUT_SOURCE_LOCALIZED_NAME_COMPONENT_BIT;
+  if (info == nullptr || info->type != XR_TYPE_INPUT_SOURCE_LOCALIZED_NAME_GET_INFO || info->whichComponents == 0 ||
+      (info->whichComponents & ~kAllComponents) != 0) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  if (!state->attached) return XR_ERROR_ACTIONSET_NOT_ATTACHED;
+  const InstanceState& instance = reg.instances.at(state->instance);
+  const auto path = path_string(instance, info->sourcePath);
+  if (!path) return XR_ERROR_PATH_INVALID;
+  const Profile* profile = nullptr;
+  std::optional<BindingPath> split;
+  for (const Profile& p : kProfiles) {
+    if (!instance.enabled(p.ext)) continue;
+    if ((split = split_binding(p, *path))) {
+      profile = &p;
+      break;
+    }
+  }
+  if (profile == nullptr) return XR_ERROR_PATH_UNSUPPORTED;
+  // Words of a path, capitalised: "input/select/click" -> "Select Click".
+  auto words = [](std::string_view text) {
+    std::string out;
+    bool start = true;
+    for (char c : text) {
+      if (c == '/' || c == '_') {
+        if (!out.empty() && out.back() != ' ') out += ' ';
+        start = true;
+      } else {
+        out += start && c >= 'a' && c <= 'z' ? static_cast<char>(c - 'a' + 'A') : c;
+        start = false;
+      }
+    }
+    return out;
+  };
+  std::string name;
+  auto add = [&](const std::string& part) { name += (name.empty() ? "" : " ") + part; };
+  if (info->whichComponents & XR_INPUT_SOURCE_LOCALIZED_NAME_USER_PATH_BIT) {
+    const std::string_view top = split->top_level;
+    add(top.starts_with("/user/hand/") ? words(top.substr(11)) + " Hand" : words(top.substr(top.rfind('/') + 1)));
+  }
+  if (info->whichComponents & XR_INPUT_SOURCE_LOCALIZED_NAME_INTERACTION_PROFILE_BIT) add(profile->localized_name);
+  if (info->whichComponents & XR_INPUT_SOURCE_LOCALIZED_NAME_COMPONENT_BIT) {
+    std::string_view component = split->subpath;
+    component.remove_prefix(component.find('/') + 1);  // drop "input/" or "output/"
+    add(words(component));
+  }
+  return two_call(capacity, count, buffer, static_cast<uint32_t>(name.size() + 1), [&](char& c, uint32_t i) {
+    c = i < name.size() ? name[i] : '\0';
+    return XR_SUCCESS;
+  });
+}
+
+// Haptics are checked and ignored.
+XrResult haptic_call(XrSession session, const XrHapticActionInfo* info, const XrHapticBaseHeader* feedback,
+                     bool apply) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  const SessionState* state = find(reg.sessions, id_of(session));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (info == nullptr || info->type != XR_TYPE_HAPTIC_ACTION_INFO ||
+      (apply && (feedback == nullptr || feedback->type != XR_TYPE_HAPTIC_VIBRATION))) {
+    return XR_ERROR_VALIDATION_FAILURE;
+  }
+  AttachedAction* action = nullptr;
+  std::string key;
+  const XrResult r =
+      attached_action(reg, *state, info->action, info->subactionPath, {XR_ACTION_TYPE_VIBRATION_OUTPUT}, action, key);
+  if (XR_FAILED(r)) {
+    return r;
+  }
+  return state->state == XR_SESSION_STATE_FOCUSED ? XR_SUCCESS : XR_SESSION_NOT_FOCUSED;
+}
+
+XrResult xrApplyHapticFeedback(XrSession session, const XrHapticActionInfo* info, const XrHapticBaseHeader* feedback) {
+  return haptic_call(session, info, feedback, true);
+}
+
+XrResult xrStopHapticFeedback(XrSession session, const XrHapticActionInfo* info) {
+  return haptic_call(session, info, nullptr, false);
+}
+
+// ---- XR_HTCX_vive_tracker_interaction ----
+// The trackers connected now.
+XrResult xrEnumerateViveTrackerPathsHTCX(XrInstance instance, uint32_t capacity, uint32_t* count,
+                                         XrViveTrackerPathsHTCX* paths) {
+  Registry& reg = registry();
+  std::lock_guard lock(reg.mutex);
+  InstanceState* state = find(reg.instances, id_of(instance));
+  if (state == nullptr) return XR_ERROR_HANDLE_INVALID;
+  if (!state->vive_tracker) return XR_ERROR_FUNCTION_UNSUPPORTED;
+  refresh_trackers(*state, mx::xr_time_now());
+  std::vector<std::size_t> connected;
+  for (std::size_t i = 0; i < 2; ++i) {
+    if (state->tracker_seen[i]) connected.push_back(i);
+  }
+  return two_call(capacity, count, paths, static_cast<uint32_t>(connected.size()),
+                  [&](XrViveTrackerPathsHTCX& p, uint32_t i) {
+                    if (p.type != XR_TYPE_VIVE_TRACKER_PATHS_HTCX) return XR_ERROR_VALIDATION_FAILURE;
+                    p.persistentPath = intern_path(*state, kTrackerPersistentPaths[connected[i]]);
+                    p.rolePath = intern_path(*state, kTrackerRoles[connected[i]]);
+                    return XR_SUCCESS;
+                  });
 }
 
 }  // namespace
@@ -1962,6 +3007,24 @@ const std::vector<Function>& functions() {
       PROPRIO_MOCK_FUNCTION(xrAcquireSwapchainImage, Ext::none),
       PROPRIO_MOCK_FUNCTION(xrWaitSwapchainImage, Ext::none),
       PROPRIO_MOCK_FUNCTION(xrReleaseSwapchainImage, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrCreateActionSet, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrDestroyActionSet, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrCreateAction, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrDestroyAction, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrSuggestInteractionProfileBindings, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrAttachSessionActionSets, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrSyncActions, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetCurrentInteractionProfile, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetActionStateBoolean, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetActionStateFloat, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetActionStateVector2f, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetActionStatePose, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrCreateActionSpace, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrEnumerateBoundSourcesForAction, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrGetInputSourceLocalizedName, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrApplyHapticFeedback, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrStopHapticFeedback, Ext::none),
+      PROPRIO_MOCK_FUNCTION(xrEnumerateViveTrackerPathsHTCX, Ext::vive_tracker),
       PROPRIO_MOCK_FUNCTION(xrConvertTimespecTimeToTimeKHR, Ext::convert_timespec_time),
       PROPRIO_MOCK_FUNCTION(xrConvertTimeToTimespecTimeKHR, Ext::convert_timespec_time),
       PROPRIO_MOCK_FUNCTION(xrCreateHandTrackerEXT, Ext::hand_tracking),

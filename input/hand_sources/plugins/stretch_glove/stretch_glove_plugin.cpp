@@ -1,8 +1,8 @@
 // libproprio_source_stretch_glove.so: the `glove` hand source (the stretch
-// glove: its read-out board on USB, or a simulated wearer streamed in real
-// time), loaded only when a configured source needs it; it is what brings
-// OpenCV DNN and hidapi into a process. The contract:
-// proprio/hand_sources/plugin_abi.hpp.
+// glove: its read-out board on USB, a simulated wearer streamed in real
+// time, or that wearer behind an emulated board and the real driver), loaded
+// only when a configured source needs it; it is what brings OpenCV DNN and
+// hidapi into a process. The contract: proprio/hand_sources/plugin_abi.hpp.
 #include "proprio/stretch_board/stretch_device.hpp"
 #include "proprio/hand_sources/plugin_abi.hpp"
 #include "proprio/hid/hid_transport.hpp"
@@ -14,7 +14,8 @@ namespace proprio::hand_sources {
 namespace {
 
 // sc.model is always set: the host fills in the shipped model (hand_sources.cpp).
-Result<PluginStarted> start_glove(const openxr_layer::SourceConfig& sc, DurationNs max_prediction_ns) {
+Result<PluginStarted> start_glove(const openxr_layer::SourceConfig& sc, DurationNs max_prediction_ns,
+                                  TrackedPoseProvider* /*poses*/) {
   const std::string& model_path = sc.model;
   std::vector<std::filesystem::path> inputs{model_path, stretch_glove::sidecar_path_for(model_path)};
   if (!sc.layout.empty()) inputs.emplace_back(sc.layout);
@@ -48,6 +49,15 @@ Result<PluginStarted> start_glove(const openxr_layer::SourceConfig& sc, Duration
     o.layout = std::move(*layout);
   }
   o.history.max_prediction_ns = max_prediction_ns;
+  if (sc.input == "emulated") {
+    // The same wearer behind the read-out board's emulator and the real driver.
+    stretch_glove_eval::EmulatedGloveSourceOptions eo;
+    eo.wearer = std::move(o);
+    eo.wearer.truth_path = sc.truth_path;
+    auto source = stretch_glove_eval::make_emulated_glove_source(eo);
+    if (!source) return source.error();
+    return PluginStarted{std::move(*source), std::move(inputs)};
+  }
   auto source = stretch_glove_eval::make_sim_glove_source(o);
   if (!source) return source.error();
   return PluginStarted{std::move(*source), std::move(inputs)};

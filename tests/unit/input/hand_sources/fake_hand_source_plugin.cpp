@@ -6,7 +6,8 @@
 namespace {
 
 proprio::Result<proprio::hand_sources::PluginStarted> start(const proprio::openxr_layer::SourceConfig&,
-                                                            proprio::DurationNs) noexcept {
+                                                            proprio::DurationNs,
+                                                            proprio::TrackedPoseProvider*) noexcept {
   return proprio::make_error(proprio::Errc::unavailable, "fake plugin");
 }
 const void* logger_address() noexcept { return nullptr; }

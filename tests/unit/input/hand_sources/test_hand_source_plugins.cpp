@@ -87,7 +87,7 @@ TEST(HandSourcePlugins, APluginOfAnotherAbiVersionIsRefused) {
   auto p = load_plugin_from(kFile, {install_fake(dir, PROPRIO_FAKE_PLUGIN_WRONG_ABI)});
   ASSERT_FALSE(p);
   EXPECT_EQ(p.error().code, Errc::unsupported);
-  EXPECT_NE(message_of(p).find("speaks plugin ABI version 999, this Proprio version 1"), std::string::npos)
+  EXPECT_NE(message_of(p).find("speaks plugin ABI version 999, this Proprio version " + std::to_string(proprio::hand_sources::kPluginAbiVersion)), std::string::npos)
       << message_of(p);
 }
 

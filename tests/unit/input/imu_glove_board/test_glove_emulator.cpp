@@ -426,6 +426,70 @@ TEST(GloveEmulator, RefusesBadOptionsAndInputsWithUsableMessages) {
 }
 
 // ---------------------------------------------------------------------------
+// Served over the fake link (ImuGloveEmulatorServer), on a manual clock
+
+TEST(GloveEmulatorServer, TicksAtTheEmulatorsRateWithTheProvidersReadingsAndAnswersTheHost) {
+  ManualClock clock(5 * kNsPerSecond);
+  auto link = std::make_shared<hid::FakeHidLink>(clock);
+  std::vector<std::pair<std::int64_t, TimeNs>> calls;  // the server's thread and this one, under its lock
+  ImuGloveEmulatorServer server(ImuGloveTicker(make(),
+                                               [&](std::int64_t k, TimeNs t, std::span<ImuSample> out) {
+                                                 calls.emplace_back(k, t);
+                                                 for (auto& s : out)
+                                                   s.accel_mps2 = Vec3(0.0, kG, 0.001 * static_cast<double>(k));
+                                               }),
+                                link, ImuGloveServeOptions{}, clock);
+  server.start();
+  clock.advance(35 * kNsPerMillisecond);
+  server.pump();
+  auto ticks = [&] { return server.with_emulator([&](const ImuGloveTicker&) { return calls; }); };
+  auto seen = ticks();
+  ASSERT_EQ(seen.size(), 4u);  // 0, 10, 20 and 30 ms at 100 Hz
+  for (std::size_t k = 0; k < seen.size(); ++k) {
+    EXPECT_EQ(seen[k].first, static_cast<std::int64_t>(k));
+    EXPECT_EQ(seen[k].second, static_cast<TimeNs>(k) * 10 * kNsPerMillisecond);
+  }
+  EXPECT_EQ(server.emulator_stats().reports_sent, 8u);  // two reports per tick of 7 IMUs
+
+  // The host sets 200 Hz: the next ticks come 5 ms apart.
+  hid::FakeHidTransport host(link);
+  ASSERT_TRUE(host.open());
+  ImuGloveCommand c;
+  c.op = ImuGloveCommandOp::set_rate;
+  c.rate_hz = 200;
+  c.token = 9;
+  ASSERT_TRUE(host.write(encode_command(c)));
+  clock.advance(20 * kNsPerMillisecond);
+  server.pump();
+  seen = ticks();
+  ASSERT_GE(seen.size(), 6u);
+  EXPECT_EQ(seen.back().second - seen[seen.size() - 2].second, 5 * kNsPerMillisecond);
+  std::array<std::uint8_t, kImuGloveInfoReportSize> info{};
+  auto n = host.get_feature(static_cast<std::uint8_t>(ImuGloveReportId::device_info), info);
+  ASSERT_TRUE(n) << n.error().message;
+  auto decoded = decode_info_report(info);
+  ASSERT_TRUE(decoded) << decoded.error().message;
+  EXPECT_EQ(decoded->rate_hz, 200);
+  EXPECT_EQ(decoded->last_command_token, 9);
+  EXPECT_EQ(server.with_emulator([](const ImuGloveTicker& g) { return g.refused_ticks; }), 0u);
+  server.stop();
+}
+
+TEST(GloveEmulatorServer, TicksWithBadReadingsAreRefusedAndCounted) {
+  ManualClock clock;
+  auto link = std::make_shared<hid::FakeHidLink>(clock);
+  ImuGloveEmulatorServer server(
+      ImuGloveTicker(make(), [](std::int64_t, TimeNs, std::span<ImuSample> out) { out[0].sensor_id = 3; }), link,
+      ImuGloveServeOptions{}, clock);
+  server.start();
+  clock.advance(25 * kNsPerMillisecond);
+  server.pump();
+  server.stop();
+  EXPECT_EQ(server.with_emulator([](const ImuGloveTicker& g) { return g.refused_ticks; }), 3u);
+  EXPECT_EQ(server.emulator_stats().reports_sent, 0u);
+}
+
+// ---------------------------------------------------------------------------
 // Fuzz seed corpus (tests/fuzz/corpus/glove_protocol)
 
 fs::path corpus_dir() { return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "glove_protocol"; }

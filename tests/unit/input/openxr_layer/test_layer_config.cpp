@@ -107,7 +107,7 @@ TEST(LayerConfig, GloveSourcesDefaultToASimulatedWearerInViewSpace) {
   EXPECT_TRUE(contains(s.describe(), "glove source"));
   auto bad = parse_layer_config("[[source]]\ntype = \"glove\"\ninput = \"usb\"\n", "g.toml");
   ASSERT_FALSE(bad.ok());
-  EXPECT_TRUE(contains(bad.error().message, "sim, device")) << bad.error().message;
+  EXPECT_TRUE(contains(bad.error().message, "sim, emulated, device")) << bad.error().message;
 
   auto no_cal = parse_layer_config("[[source]]\ntype = \"glove\"\ninput = \"device\"\n", "g.toml");
   ASSERT_FALSE(no_cal.ok());

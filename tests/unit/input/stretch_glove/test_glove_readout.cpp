@@ -330,5 +330,51 @@ TEST(GloveReadout, RejectsBadInput) {
   EXPECT_NE(ReadoutOptions{}.describe().find("every 16 updates"), std::string::npos);
 }
 
+
+// Bursts of 12 (a board's reports): the frame due at the 16th update is made
+// at the end of the burst that holds it, from all 24 measurements, with the
+// 24th one's time; record() alone never solves.
+TEST(GloveReadout, DeferredSolveUsesTheWholeBurst) {
+  auto burst = make_readout();
+  auto each = make_readout();
+  Rng rng(7);
+  const auto before = measure_all(random_cells(rng));
+  const auto after = measure_all(random_cells(rng));
+  CellFrame fb = burst.make_frame(), fe = each.make_frame();
+  std::size_t k = 0;
+  auto value = [&](std::size_t i) { return i < 16 ? before[i % 182] : after[i % 182]; };
+  int deferred_frames = 0;
+  for (int report = 0; report < 2 * 182 / 12; ++report) {
+    bool due = false;
+    for (int i = 0; i < 12; ++i, ++k) {
+      due = burst.record(k % 182, value(k), static_cast<TimeNs>(k) * 1000);
+      if (k + 1 == 16) {
+        EXPECT_TRUE(due);
+      } else if (k + 1 < 16) {
+        EXPECT_FALSE(due);
+      }
+      each.push(k % 182, value(k), static_cast<TimeNs>(k) * 1000, fe);
+    }
+    EXPECT_EQ(burst.frame_due(), due);
+    if (!burst.solve_due(fb)) continue;
+    ++deferred_frames;
+    EXPECT_EQ(fb.time_ns, static_cast<TimeNs>(k - 1) * 1000);  // the burst's last measurement
+    EXPECT_FALSE(burst.frame_due());
+    EXPECT_FALSE(burst.solve_due(fb));
+  }
+  // Frames fall due every 16 updates; reports end every 12, so 3 of 4 reports end in a solve.
+  EXPECT_EQ(deferred_frames, static_cast<int>(k / 16));
+  EXPECT_EQ(burst.updates(), each.updates());
+  // The first deferred frame held measurements 17-24 (the "after" hand), which the push() frame at 16 did not.
+  auto first = make_readout();
+  CellFrame f1 = first.make_frame(), f2 = first.make_frame();
+  for (std::size_t i = 0; i < 24; ++i) first.record(i, value(i), static_cast<TimeNs>(i));
+  ASSERT_TRUE(first.solve_due(f1));
+  auto pushed = make_readout();
+  for (std::size_t i = 0; i < 16; ++i) pushed.push(i, value(i), static_cast<TimeNs>(i), f2);
+  EXPECT_EQ(f1.rows_used, 24u);
+  EXPECT_EQ(f2.rows_used, 16u);
+}
+
 }  // namespace
 }  // namespace proprio::stretch_glove

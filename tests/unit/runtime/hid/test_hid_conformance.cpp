@@ -65,58 +65,15 @@ Options quick_link() {
 
 // ---------------------------------------------------------------------------
 // The IMU glove board. Its emulator runs on ticks of IMU readings, not on
-// time, so the test serves it through a small adapter that ticks it at its
-// rate with synthetic readings.
+// time: the production server (ImuGloveEmulatorServer) ticks it at its rate,
+// here with synthetic readings.
 
-std::vector<ImuSample> synthetic_imu_tick(std::int64_t k, std::size_t imus) {
-  std::vector<ImuSample> out(imus);
-  for (std::size_t i = 0; i < imus; ++i) {
-    out[i].sensor_id = static_cast<std::uint16_t>(i);
+void synthetic_imu_tick(std::int64_t k, TimeNs, std::span<ImuSample> out) {
+  for (std::size_t i = 0; i < out.size(); ++i) {
     out[i].accel_mps2 = Vec3(0.5 * static_cast<double>(i) - 1.0, 0.05 * static_cast<double>(k % 100), 9.8);
     out[i].gyro_radps = Vec3(0.1 * static_cast<double>(i), -0.2, std::sin(0.1 * static_cast<double>(k)));
   }
-  return out;
 }
-
-struct TickedImuGlove {
-  ImuGloveEmulator emulator;
-  TimeNs next_tick_ns = 0;
-  std::int64_t ticks = 0;
-  const ImuGloveEmulatorStats& stats() const noexcept { return emulator.stats(); }
-};
-
-struct TickedImuGloveServeOptions {
-  DurationNs latency_min_ns = 200'000;
-  DurationNs latency_jitter_ns = 800'000;
-  DurationNs pump_interval_ns = 2 * kNsPerMillisecond;
-  std::uint64_t seed = 1;
-};
-
-struct TickedImuGloveServerTraits {
-  using Emulator = TickedImuGlove;
-  using Options = TickedImuGloveServeOptions;
-  using Report = ImuGloveEmulatedReport;
-  static void advance(TickedImuGlove& g, const Options&, TimeNs now_ns, std::vector<Report>& out) {
-    const std::size_t imus = g.emulator.options().imu_count;
-    while (g.next_tick_ns <= now_ns) {
-      const Status s = g.emulator.tick(g.next_tick_ns, synthetic_imu_tick(g.ticks, imus), out);
-      if (!s.ok()) ADD_FAILURE() << "IMU glove emulator tick: " << s.error().message;
-      ++g.ticks;
-      g.next_tick_ns += kNsPerSecond / std::max<std::uint16_t>(g.emulator.rate_hz(), 1);
-    }
-  }
-  static void handle_command(TickedImuGlove& g, std::span<const std::uint8_t> bytes, TimeNs) {
-    (void)g.emulator.handle_command(bytes);
-  }
-  static std::size_t feature(TickedImuGlove& g, std::uint8_t id, TimeNs now_ns, std::span<std::uint8_t> out) {
-    if (id != static_cast<std::uint8_t>(ImuGloveReportId::device_info) || out.size() < kImuGloveInfoReportSize) {
-      return 0;
-    }
-    const auto info = g.emulator.info_report(now_ns);
-    std::copy(info.begin(), info.end(), out.begin());
-    return info.size();
-  }
-};
 
 // What the two sensor boards have in common: samples go to a callback,
 // send_command() queues (it has no answer), the stream decoder counts
@@ -163,11 +120,11 @@ struct ImuGloveBoard : SensorBoard<ImuGloveBoard> {
   using Stats = ImuGloveDeviceStats;
   using Options = ImuGloveDeviceOptions;
   using Command = ImuGloveCommand;
-  using Server = hid::EmulatorServer<TickedImuGloveServerTraits>;
+  using Server = ImuGloveEmulatorServer;
   static std::unique_ptr<Server> make_server(std::shared_ptr<hid::FakeHidLink> link) {
     auto emulator = ImuGloveEmulator::create({});
     EXPECT_TRUE(emulator.ok()) << (emulator.ok() ? "" : emulator.error().message);
-    return std::make_unique<Server>(TickedImuGlove{std::move(*emulator)}, std::move(link));
+    return std::make_unique<Server>(ImuGloveTicker(std::move(*emulator), synthetic_imu_tick), std::move(link));
   }
   static Result<Command> decode_command(std::span<const std::uint8_t> b) { return devices::decode_command(b); }
 };

@@ -18,6 +18,7 @@
 #include "proprio/core/hand_source.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/core/tracked_pose_provider.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 
 namespace proprio::hand_sources {
@@ -26,9 +27,13 @@ using openxr_layer::SourceConfig;
 using openxr_layer::SourceType;
 
 // max_prediction_ns: furthest a lookup extrapolates past the newest pose.
+// poses: what the host tracks (the OpenXR layer: the headset), for sources
+// that need it (a live vist source's head-mounted camera); may be null, and
+// must outlive the source.
 // Errors name the source and what is missing (a file, a calibration, a board,
 // a plugin and every folder it was looked for in).
-Result<std::unique_ptr<HandSource>> start_hand_source(const SourceConfig& config, DurationNs max_prediction_ns);
+Result<std::unique_ptr<HandSource>> start_hand_source(const SourceConfig& config, DurationNs max_prediction_ns,
+                                                      TrackedPoseProvider* poses = nullptr);
 
 // The stretch glove's pose network shipped with Proprio, in the data folder
 // (proprio/core/data_dir.hpp): what a glove source uses without `model`.

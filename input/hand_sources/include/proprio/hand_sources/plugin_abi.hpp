@@ -23,12 +23,13 @@
 #include "proprio/core/log.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/core/tracked_pose_provider.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 
 namespace proprio::hand_sources {
 
 // Bump when the table's layout or meaning changes.
-inline constexpr std::uint32_t kPluginAbiVersion = 1;
+inline constexpr std::uint32_t kPluginAbiVersion = 2;
 inline constexpr const char* kPluginEntryPoint = "proprio_hand_source_plugin_v1";
 
 // What a plugin's start returns.
@@ -45,8 +46,10 @@ struct HandSourcePluginV1 {
   const char* build_id = nullptr;
   const char* family = nullptr;  // "vist", "stretch_glove"
   // Starts the source `config` describes (a type this family serves).
-  Result<PluginStarted> (*start)(const openxr_layer::SourceConfig& config, DurationNs max_prediction_ns) noexcept =
-      nullptr;
+  // `poses` (may be null; outlives the source): what the host tracks, e.g. the
+  // head for a head-mounted camera.
+  Result<PluginStarted> (*start)(const openxr_layer::SourceConfig& config, DurationNs max_prediction_ns,
+                                 TrackedPoseProvider* poses) noexcept = nullptr;
   // The address of the spdlog logger the plugin's copy of proprio::logger()
   // writes to: the host checks it is its own (one logger per process).
   const void* (*logger_address)() noexcept = nullptr;
@@ -75,7 +78,8 @@ inline const void* plugin_logger_address() noexcept { return &logger(); }
 }  // namespace proprio::hand_sources
 
 // Defines a plugin's entry point: its table, with `start_fn`
-// (Result<PluginStarted>(const SourceConfig&, DurationNs), which may throw)
+// (Result<PluginStarted>(const SourceConfig&, DurationNs, TrackedPoseProvider*),
+// which may throw)
 // behind plugin_guarded. One use per plugin, at global scope.
 #define PROPRIO_DEFINE_HAND_SOURCE_PLUGIN(family_name, start_fn)                                                     \
   extern "C" __attribute__((visibility("default"))) const ::proprio::hand_sources::HandSourcePluginV1*              \
@@ -83,9 +87,10 @@ inline const void* plugin_logger_address() noexcept { return &logger(); }
     static const ::proprio::hand_sources::HandSourcePluginV1 table{                                                  \
         sizeof(::proprio::hand_sources::HandSourcePluginV1), ::proprio::hand_sources::kPluginAbiVersion,            \
         PROPRIO_HAND_SOURCE_BUILD_ID, family_name,                                                                   \
-        [](const ::proprio::openxr_layer::SourceConfig& config, ::proprio::DurationNs max_prediction_ns) noexcept { \
+        [](const ::proprio::openxr_layer::SourceConfig& config, ::proprio::DurationNs max_prediction_ns,            \
+           ::proprio::TrackedPoseProvider* poses) noexcept {                                                         \
           return ::proprio::hand_sources::plugin_guarded<::proprio::hand_sources::PluginStarted>(                   \
-              family_name " plugin", [&] { return start_fn(config, max_prediction_ns); });                          \
+              family_name " plugin", [&] { return start_fn(config, max_prediction_ns, poses); });                   \
         },                                                                                                           \
         &::proprio::hand_sources::plugin_logger_address};                                                            \
     return &table;                                                                                                   \

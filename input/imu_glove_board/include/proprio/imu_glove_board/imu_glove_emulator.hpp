@@ -12,9 +12,11 @@
 //
 // It depends on core and hid only; whoever links proprio::sim does the wiring (see
 // tools/proprio/cmd_glove.cpp and tests/unit/input/imu_glove_board/test_glove_emulator.cpp).
-// Deterministic for a given seed. Not thread-safe.
+// Deterministic for a given seed. Not thread-safe; ImuGloveEmulatorServer
+// (below) serves one over a hid::FakeHidLink in real time.
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <vector>
@@ -24,6 +26,7 @@
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
 #include "proprio/hid/emulator_faults.hpp"
+#include "proprio/hid/emulator_server.hpp"
 #include "proprio/imu_glove_board/imu_glove_protocol.hpp"
 
 namespace proprio::devices {
@@ -146,5 +149,53 @@ class ImuGloveEmulator {
   std::vector<ImuGloveImuRaw> tick_raw_;  // this tick's, per IMU
   ImuGloveEmulatorStats stats_;
 };
+
+// ---------------------------------------------------------------------------
+// Serving the emulator over a fake cable, in real time.
+
+// What the IMUs read at one tick: fills `out` (already sized to imu_count,
+// sensor_id set in order) for tick number `tick` (from 0, counting across
+// reboots) measured at emulator time t_ns. Called on the server's thread, one
+// call per tick in time order, so a stateful source (proprio::sim's
+// ImuSimulator, whose bias walk runs tick by tick) can be read directly.
+using ImuGloveReadingProvider = std::function<void(std::int64_t tick, TimeNs t_ns, std::span<ImuSample> out)>;
+
+// The emulator with what drives it: the firmware runs on ticks of readings,
+// not on time, so the server ticks it at its current rate (which a host
+// command may change) with the provider's readings.
+struct ImuGloveTicker {
+  ImuGloveTicker(ImuGloveEmulator e, ImuGloveReadingProvider r) : emulator(std::move(e)), readings(std::move(r)) {}
+  ImuGloveEmulator emulator;
+  ImuGloveReadingProvider readings;
+  TimeNs next_tick_ns = 0;
+  std::int64_t ticks = 0;
+  // Ticks the emulator refused (the provider filled wrong sensor IDs): nothing
+  // was sent for them. A correct provider leaves this at 0.
+  std::uint64_t refused_ticks = 0;
+  std::vector<ImuSample> scratch;
+  const ImuGloveEmulatorStats& stats() const noexcept { return emulator.stats(); }
+};
+
+struct ImuGloveServeOptions {
+  // Each report reaches the host this long after it left the board: a floor
+  // (USB polling, host controller, kernel) plus a uniform extra up to jitter.
+  DurationNs latency_min_ns = 200'000;
+  DurationNs latency_jitter_ns = 800'000;
+  DurationNs pump_interval_ns = 2 * kNsPerMillisecond;  // the pumping thread's period
+  std::uint64_t seed = 1;                               // latency draws
+};
+
+// The board's end of a hid::FakeHidLink (hid::EmulatorServer): what the
+// emulated VIST rig (proprio::vist_eval) and the HID conformance tests use.
+struct ImuGloveEmulatorServerTraits {
+  using Emulator = ImuGloveTicker;
+  using Options = ImuGloveServeOptions;
+  using Report = ImuGloveEmulatedReport;
+  static void advance(ImuGloveTicker& glove, const ImuGloveServeOptions& options, TimeNs now_ns,
+                      std::vector<ImuGloveEmulatedReport>& out);
+  static void handle_command(ImuGloveTicker& glove, std::span<const std::uint8_t> bytes, TimeNs now_ns);
+  static std::size_t feature(ImuGloveTicker& glove, std::uint8_t report_id, TimeNs now_ns, std::span<std::uint8_t> out);
+};
+using ImuGloveEmulatorServer = hid::EmulatorServer<ImuGloveEmulatorServerTraits>;
 
 }  // namespace proprio::devices

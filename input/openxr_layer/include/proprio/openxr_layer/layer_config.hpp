@@ -3,6 +3,7 @@
 // tracking origins are bound to OpenXR reference spaces. Read from
 // $PROPRIO_LAYER_CONFIG, else $XDG_CONFIG_HOME/proprio/layer.toml, else
 // ~/.config/proprio/layer.toml. Documented in docs/openxr-layer.md.
+#include <array>
 #include <filesystem>
 #include <string>
 #include <string_view>
@@ -18,6 +19,11 @@ namespace proprio::openxr_layer {
 
 enum class SourceType { sim, replay, vist, glove };
 enum class ReferenceSpace { view, local, stage };
+// Where the wrist of a source's hands comes from (docs/openxr-layer.md, "The
+// wrist"). `source`: the source's own (VIST and sim track it; the stretch
+// glove's is its fixed pose). The others take the wrist from the app's XR
+// runtime at each xrLocateHandJointsEXT and keep the source's fingers.
+enum class WristSource { source, controller, tracker, runtime_hand };
 // What to do when the runtime implements XR_EXT_hand_tracking itself.
 enum class RuntimeHandTracking {
   automatic,     // override when a Proprio source is configured, else pass through
@@ -28,6 +34,7 @@ enum class RuntimeHandTracking {
 std::string_view to_string(SourceType t) noexcept;
 std::string_view to_string(ReferenceSpace s) noexcept;
 std::string_view to_string(RuntimeHandTracking m) noexcept;
+std::string_view to_string(WristSource w) noexcept;
 
 struct SourceConfig {
   SourceType type = SourceType::sim;
@@ -43,16 +50,46 @@ struct SourceConfig {
   std::uint64_t seed = 1;
   double rate_hz = 90.0;  // how often the simulated tracker produces a pose
 
+  // The wrist, for any source: where it comes from and, for a controller or
+  // a tracker, the wrist in that device's pose frame (grip pose): from
+  // `wrist_calibration` (proprio calibrate wrist) when given, else inline.
+  WristSource wrist = WristSource::source;
+  Pose T_device_wrist;
+  std::string wrist_calibration;
+  // wrist "tracker": the XR_HTCX_vive_tracker_interaction role per hand
+  // (left, right), e.g. "left_wrist" for /user/vive_tracker_htcx/role/left_wrist.
+  std::array<std::string, 2> tracker_role{"left_wrist", "right_wrist"};
+
   // replay: a recorded session, played from when the layer starts.
-  // vist: a recorded VIST session (proprio sim-vist, or a live recording)
-  // replayed through the VIST tracker in real time.
+  // vist input "replay": a recorded VIST session (proprio sim-vist, or a live
+  // recording) replayed through the VIST tracker in real time.
   std::string path;
   bool loop = true;
 
+  // vist input "device": the IMU board on USB HID and a stereo camera
+  // (/dev/videoN, or a side-by-side video file played in real time), with the
+  // head pose at each capture time from the runtime (the source's space must
+  // not be "view": the tracker works in a world that stays still).
+  // vist input "emulated": a simulated wearer behind the same code paths (the
+  // IMU board emulator speaking the real HID bytes, a camera rendering the
+  // marker images from the runtime's head pose).
+  std::string camera = "/dev/video0";
+  std::string camera_right;        // a second camera (or video) for the right eye
+  std::string stereo_calibration;  // from `proprio calibrate stereo`: rectification
+  std::string glove_description;   // VIST glove TOML; empty: the thesis glove
+  std::string imu_path, imu_serial;  // which IMU board, when several are plugged in
+
+  // Emulated inputs (vist and glove "emulated"): a CSV of the simulated
+  // wearer's true joints, written as the emulator runs, for tests and
+  // benchmarks; the tracker never sees it. Empty: not written.
+  std::string truth_path;
+
   // glove: the stretch-sensing glove. input "sim" = simulated subject
-  // (subject, seed above); "device" = a read-out board on USB, with the
-  // wearer's min-max calibration file. The model and layout default to the
-  // shipped ones.
+  // (subject, seed above); "emulated" = the same wearer behind the read-out
+  // board's emulator and the real driver; "device" = a read-out board on USB,
+  // with the wearer's min-max calibration file. The model and layout default
+  // to the shipped ones.
+  // vist: "replay" (path), "device" or "emulated" (above).
   std::string input = "sim";
   std::string model;        // .onnx with its .json sidecar
   std::string layout;       // glove layout TOML; empty: the built-in thesis-like glove
@@ -80,6 +117,12 @@ std::filesystem::path default_layer_config_path();
 inline constexpr std::uint64_t kMaxLayerConfigBytes = 1024 * 1024;
 Result<LayerConfig> load_layer_config(const std::filesystem::path& path);
 Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::string& source_name);
+// The tracker-to-wrist offset `proprio calibrate wrist` writes: a small TOML
+// file ([wrist] position_m = [x, y, z], rotation_deg = [rx, ry, rz], the wrist
+// in the device's grip frame). Errors name the file and key.
+Result<Pose> load_wrist_calibration(const std::filesystem::path& path);
+std::string format_wrist_calibration(const Pose& T_device_wrist, std::string_view comment);
+
 // A complete, commented configuration using the simulated hand (or a replay
 // when recording_path is given), for `proprio layer init-config` and the docs.
 std::string example_layer_config(const std::string& recording_path = {});

@@ -24,6 +24,7 @@
 // Measurements the board or the host flagged (saturated, below zero, no
 // signal) are rejected and counted unless deliver_flagged is set: the cell
 // solve must not mix a clipped reading into a least-squares fit.
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -103,6 +104,11 @@ class StretchDevice final : hid::LinkHandler {
 
   // Set before start(). With a sample callback, measurements go to it instead of the ring.
   void set_sample_callback(SampleCallback callback) { outlet_.set_callback(std::move(callback)); }
+  // Set before start(). Called on the reader thread after each delivery of
+  // measurements (what the reader took in one go: a report, or a backlog of
+  // them), so that a consumer that works on batches acts once the whole
+  // report is in rather than partway through it.
+  void set_burst_callback(std::function<void()> callback) { burst_callback_ = std::move(callback); }
   void set_state_callback(StateCallback callback) { link_.set_state_callback(std::move(callback)); }
 
   // Starts the reader thread; it connects on its own (a board that is not
@@ -146,6 +152,7 @@ class StretchDevice final : hid::LinkHandler {
   TimeNs last_time_ns_ = 0;  // newest delivered measurement time
   bool layout_warned_ = false;
   std::vector<StretchSample> pending_;  // capacity reserved once: kStretchMaxBurst reports
+  std::function<void()> burst_callback_;
 
   hid::SampleOutlet<StretchSample> outlet_;
   hid::CommandQueue<StretchCommand> commands_;

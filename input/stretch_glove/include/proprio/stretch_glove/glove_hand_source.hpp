@@ -47,6 +47,12 @@ class GloveHandSource final : public HandSource {
   // One producer thread at a time. Returns true when a new pose was published.
   bool push_measurement(std::size_t combination, double capacitance_pf, TimeNs t_ns);
   bool push_frame(const CellFrame& frame);
+  // The same for measurements that arrive in bursts (a read-out board's
+  // reports): add_measurement() only records; end_burst() makes the frame
+  // that fell due during the burst, if any, from all of it (MatrixReadout::
+  // record), so the pose carries the newest measurement in hand.
+  void add_measurement(std::size_t combination, double capacitance_pf, TimeNs t_ns);
+  bool end_burst();
 
   // Producer thread only (or before the first push).
   void set_wrist_provider(WristPoseProvider provider) { tracker_.set_wrist_provider(std::move(provider)); }

@@ -91,6 +91,18 @@ class MatrixReadout {
   // (counted in rejected_updates()).
   bool push(std::size_t combination, double capacitance_pf, TimeNs time_ns, CellFrame& out);
 
+  // For measurements that arrive in bursts (a read-out board sends 12 per
+  // report): record() takes one without solving and returns whether a frame
+  // is due (solve_every updates since the last one); solve_due() then makes
+  // it from every measurement recorded so far, its time the newest one's.
+  // Solving at the end of a burst instead of at the update that made the
+  // frame due uses the rest of the burst, which is already in hand, so the
+  // frame is fresher at no cost in delivery time. push() is record() and,
+  // when due, solve_due().
+  bool record(std::size_t combination, double capacitance_pf, TimeNs time_ns);
+  bool solve_due(CellFrame& out);  // false (out untouched) when no frame is due
+  bool frame_due() const noexcept { return due_; }
+
   // Solves one whole C_m vector (measurement_count() entries, row order of
   // the measurement matrix) directly: no window, same exclusion rules.
   Status solve(std::span<const double> measurements_pf, TimeNs time_ns, CellFrame& out);
@@ -138,6 +150,8 @@ class MatrixReadout {
   std::uint64_t updates_ = 0;
   std::uint64_t rejected_ = 0;
   std::uint64_t frames_ = 0;
+  bool due_ = false;          // solve_every updates were recorded since the last frame
+  TimeNs latest_time_ns_ = 0;  // of the newest recorded measurement
 };
 
 }  // namespace proprio::stretch_glove

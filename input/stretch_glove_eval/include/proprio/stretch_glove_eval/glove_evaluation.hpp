@@ -18,6 +18,9 @@
 #include "proprio/core/pose_history.hpp"
 #include "proprio/core/time.hpp"
 #include "proprio/glove_descriptions/stretch_glove_layout.hpp"
+#include "proprio/stretch_board/stretch_device.hpp"
+#include "proprio/stretch_board/stretch_emulator.hpp"
+#include "proprio/stretch_glove/glove_hand_source.hpp"
 #include "proprio/stretch_glove/glove_tracker.hpp"
 #include "proprio/sim/stretch_glove_sim.hpp"
 
@@ -91,8 +94,69 @@ struct SimGloveSourceOptions {
   double exploration_s = 60.0;
   stretch_glove::GloveTrackerOptions tracker;  // hand and size are the subject's
   PoseHistoryOptions history;
+  // The wearer's true hand (sim::HandTruthWriter CSV), in the source's world
+  // and time base: the same hand size and the tracker's wrist (the glove's
+  // fixed T_world_wrist_fixed), so its fingers compare directly with the
+  // served poses. Empty: not written. One row every truth_every measurements
+  // (8: 120 Hz, twice the pose rate, so a reader can interpolate).
+  std::filesystem::path truth_path;
+  int truth_every = 8;
+
+  Status validate() const;
+  std::string describe() const;
 };
 Result<std::unique_ptr<HandSource>> make_sim_glove_source(const SimGloveSourceOptions& options,
                                                           const Clock& clock = MonotonicClock::instance());
+
+// The same wearer behind the real device code path: the wearer's
+// capacitances are what an emulated read-out board (devices::StretchEmulator)
+// measures, served in real time over the in-memory HID link
+// (StretchEmulatorServer, emulator time 0 = when the source starts) and read
+// by the real driver and pipeline (stretch_glove::GloveBoardSource). The
+// OpenXR layer's `glove` source with `input = "emulated"` is this.
+//
+// The board measures the combinations in the simulator's own cycle at its
+// rate, so each reading is the simulator's measurement at that time (noise,
+// spikes and saturation included). After a board restart (an unplug) the
+// board's cycle starts again at combination 0 and no longer lines up with the
+// simulator's: a reading is then the combination's sum of the simulator's
+// cells at the nearest measurement time, with that measurement's drift, noise
+// and spike. While the board is off the wearer keeps moving; the truth rows
+// of that time are written when it comes back.
+struct EmulatedGloveSourceOptions {
+  SimGloveSourceOptions wearer;  // subject, seed, model, layout, calibration, pipeline, truth
+  // The board's faults (emulator time). Each unplug also pulls the cable
+  // (hid::FakeHidLink), so the host sees the board vanish and come back.
+  devices::StretchEmulatorFaults faults;
+  devices::StretchServeOptions serve;    // link latency and the emulator's pumping
+  devices::StretchDeviceOptions device;  // the driver's (strip counts and flagged delivery are set from the layout)
+
+  Status validate() const;
+  std::string describe() const;
+};
+
+class EmulatedGloveSource final : public HandSource {
+ public:
+  ~EmulatedGloveSource() override;
+  std::string_view name() const noexcept override { return "glove"; }
+  bool available(Handedness hand) const noexcept override;
+  Result<HandPose> pose_at(Handedness hand, TimeNs t_ns) override;
+  PoseLookup lookup(Handedness hand, TimeNs t_ns, HandPose& out) noexcept override;
+
+  stretch_glove::GloveSourceStats stats() const;
+  devices::StretchDeviceStats device_stats();
+  devices::StretchEmulatorStats emulator_stats() const;
+  // CLOCK_MONOTONIC of emulator time 0 (the unplugs' time base).
+  TimeNs time_zero_ns() const;
+  // Readings made while the board's cycle did not line up with the simulator's (after a restart).
+  std::uint64_t off_cycle_readings() const;
+
+ private:
+  friend Result<std::unique_ptr<EmulatedGloveSource>> make_emulated_glove_source(const EmulatedGloveSourceOptions&);
+  struct Impl;
+  explicit EmulatedGloveSource(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+Result<std::unique_ptr<EmulatedGloveSource>> make_emulated_glove_source(const EmulatedGloveSourceOptions& options);
 
 }  // namespace proprio::stretch_glove_eval

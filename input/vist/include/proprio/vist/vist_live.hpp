@@ -22,9 +22,13 @@
 // file ends the camera thread; the glove keeps streaming.
 //
 // Unplugs: the glove reconnects on its own (ImuGloveDevice); a camera that
-// stops delivering is reopened by StereoCamera and, failing that, its thread
-// ends with the state `failed`. Neither stops the other: the tracker runs on
-// what arrives and re-acquires when both are back.
+// stops delivering is reopened by StereoCamera. Given a camera, a camera lost
+// for good (StereoCamera's `failed`) ends the camera thread. Given a
+// StereoCameraOpener instead, the camera thread opens the camera itself and
+// keeps trying (camera_retry_s apart) while it is not there, and again after
+// it is lost: a camera plugged in later is picked up. Neither stops the
+// other: the tracker runs on what arrives and re-acquires when both are back.
+// (VistLiveSource, vist_live_source.hpp, is the whole thing as a HandSource.)
 #include <atomic>
 #include <functional>
 #include <memory>
@@ -45,12 +49,19 @@ namespace proprio::vist {
 // (the frame is dropped and counted). Called on the camera thread.
 using HeadPoseProvider = std::function<bool(TimeNs t_ns, Pose& T_world_head)>;
 
+// Opens the stereo camera, on the camera thread (so a camera that is slow to
+// open or not there yet never holds up the caller). An error is retried.
+using StereoCameraOpener = std::function<Result<std::unique_ptr<StereoCamera>>()>;
+
 struct VistLiveOptions {
   MarkerDetectorOptions detector;
   // The head when no provider is given: standing, looking along -Z.
   Pose T_world_head_fixed{Quat::Identity(), Vec3(0.0, 1.6, 0.0)};
   // Video files: the delay from a frame's timestamp to its delivery.
   double file_latency_s = 0.03;
+  // With a StereoCameraOpener: the wait between attempts to open a camera
+  // that is not there, and after a camera was lost for good.
+  double camera_retry_s = 1.0;
 
   Status validate() const;
   std::string describe() const;
@@ -59,10 +70,14 @@ struct VistLiveOptions {
 struct VistLiveStats {
   hid::LinkState glove_state = hid::LinkState::stopped;
   CameraState camera_state = CameraState::stopped;
-  std::string camera_error;  // why the camera thread ended, if it did
+  std::string camera_error;                // why the camera thread ended, or why no camera is open now
+  bool camera_open = false;                // a camera is open (it may still be reopening)
+  std::uint64_t camera_opens = 0;          // cameras opened (1 for a camera given to create)
+  std::uint64_t camera_open_failures = 0;  // StereoCameraOpener calls that failed
   std::uint64_t imu_samples = 0;          // pushed to the tracker
   std::uint64_t imu_unknown_sensor = 0;   // sensor id not in the glove description: dropped
   std::uint64_t frames = 0;               // stereo frames detected and pushed
+  TimeNs last_frame_capture_ns = 0;       // of the newest frame pushed; 0: none yet
   std::uint64_t frames_without_head = 0;  // no head pose at the capture time: dropped
   std::uint64_t detection_errors = 0;
   std::uint64_t markers_detected = 0;     // over all frames, both cameras
@@ -81,6 +96,13 @@ class VistLiveInput {
                                                        VistLiveOptions options = {},
                                                        HeadPoseProvider head = nullptr,
                                                        const Clock& clock = MonotonicClock::instance());
+  // The same with a camera the camera thread opens itself (and reopens).
+  // Each camera opened must deliver the rig's image size; one that does not
+  // is closed again and the error kept in stats().camera_error.
+  static Result<std::unique_ptr<VistLiveInput>> create_with_opener(
+      VistHandSource& sink, const ImuGloveDescription& glove, std::unique_ptr<devices::ImuGloveDevice> glove_device,
+      StereoCameraOpener open_camera, VistLiveOptions options = {}, HeadPoseProvider head = nullptr,
+      const Clock& clock = MonotonicClock::instance());
   ~VistLiveInput();  // stop()s
   VistLiveInput(const VistLiveInput&) = delete;
   VistLiveInput& operator=(const VistLiveInput&) = delete;
@@ -90,22 +112,36 @@ class VistLiveInput {
   // Stops both and joins them. The sink keeps what it has.
   void stop();
   bool camera_running() const noexcept { return camera_running_.load(std::memory_order_acquire); }
+  // Capture time of the newest stereo frame pushed to the tracker; 0: none yet.
+  TimeNs last_frame_capture_ns() const noexcept { return last_frame_ns_.load(std::memory_order_acquire); }
 
   VistLiveStats stats() const;
   devices::ImuGloveDevice& glove_device() noexcept { return *glove_; }
 
  private:
-  VistLiveInput(VistHandSource& sink, std::size_t imu_count, Pose T_head_leftcam,
+  VistLiveInput(VistHandSource& sink, std::size_t imu_count, const PinholeCamera& camera_model, Pose T_head_leftcam,
                 std::unique_ptr<devices::ImuGloveDevice> glove, std::unique_ptr<StereoCamera> camera,
-                MarkerDetector detector, VistLiveOptions options, HeadPoseProvider head, const Clock& clock);
+                StereoCameraOpener opener, MarkerDetector detector, VistLiveOptions options, HeadPoseProvider head,
+                const Clock& clock);
+  static Result<std::unique_ptr<VistLiveInput>> make(VistHandSource& sink, const ImuGloveDescription& glove,
+                                                     std::unique_ptr<devices::ImuGloveDevice> glove_device,
+                                                     std::unique_ptr<StereoCamera> camera, StereoCameraOpener opener,
+                                                     VistLiveOptions options, HeadPoseProvider head,
+                                                     const Clock& clock);
   void camera_loop();
+  bool open_camera();                 // camera thread: one attempt with the opener
+  void drop_camera(std::string why);  // camera thread: close it, keep why
   bool wait_until(TimeNs t_ns);  // false: stopping
 
   VistHandSource& sink_;
   std::size_t imu_count_;
+  PinholeCamera camera_model_;  // the rig's: what every camera must deliver
   Pose T_head_leftcam_;
   std::unique_ptr<devices::ImuGloveDevice> glove_;
+  // Replaced only by the camera thread, under stats_mutex_ (stats() reads its state).
   std::unique_ptr<StereoCamera> camera_;
+  StereoCameraOpener opener_;             // null: camera_ is the only camera
+  std::string last_logged_camera_error_;  // camera thread: log each new reason once
   MarkerDetector detector_;
   VistLiveOptions options_;
   HeadPoseProvider head_;
@@ -116,6 +152,7 @@ class VistLiveInput {
   VistLiveStats camera_stats_;  // the camera thread's part, under stats_mutex_
   double detection_ms_sum_ = 0.0;
 
+  std::atomic<TimeNs> last_frame_ns_{0};
   std::atomic<bool> stop_{false};
   std::atomic<bool> camera_running_{false};
   std::thread camera_thread_;

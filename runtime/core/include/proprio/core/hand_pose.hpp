@@ -24,6 +24,12 @@ inline constexpr std::uint8_t kJointFullyTracked =
 // back of the hand, the same on both hands.
 struct HandPose {
   TimeNs time_ns = 0;  // when the hand was in this pose (measurement time)
+  // Latency bookkeeping (CLOCK_MONOTONIC; 0 = unknown). data_time_ns: the
+  // newest sensor sample behind this pose; ready_time_ns: when the pose could
+  // first be served (PoseHistory::push stamps it). A lookup between or past
+  // samples reports the newer sample's two times.
+  TimeNs data_time_ns = 0;
+  TimeNs ready_time_ns = 0;
   Handedness hand = Handedness::right;
   bool active = false;  // false: nothing below is meaningful
   std::array<Pose, kHandJointCount> T_world_joint{};

@@ -117,6 +117,18 @@ struct XrProbeSecond {             // a window ended (about once a second, and a
   double window_s = 0.0;
   std::vector<XrProbeHandSecond> hands;
 };
+// XR_PROPRIO_hand_tracking_latency, when Proprio's layer serves the hand:
+// histograms over the run (bins of bin_ms, the last one open-ended).
+struct XrProbeLatency {
+  std::uint64_t poses = 0;
+  double bin_ms = 0.5;
+  std::vector<std::uint64_t> sample_to_ready;  // newest sensor sample -> pose servable
+  std::vector<std::uint64_t> age_at_locate;    // newest sensor sample -> xrLocateHandJointsEXT
+  double max_sample_to_ready_ms = 0.0, max_age_at_locate_ms = 0.0;
+  // The upper edge of the bin holding the q-quantile (0..1); NaN without counts.
+  static double quantile_ms(const std::vector<std::uint64_t>& bins, double bin_ms, double q);
+};
+
 // The run's totals; reported before the session is torn down (a failed
 // teardown still makes the run an Error).
 struct XrProbeSummary {
@@ -125,6 +137,8 @@ struct XrProbeSummary {
   std::uint64_t frames = 0;
   XrProbeSessionKind kind = XrProbeSessionKind::headless;
   std::vector<std::pair<XrProbeHand, XrProbeHandCounts>> hands;
+  // Per hand, when the layer offered XR_PROPRIO_hand_tracking_latency.
+  std::vector<std::pair<XrProbeHand, XrProbeLatency>> latency;
 
   bool any_active() const;
 };

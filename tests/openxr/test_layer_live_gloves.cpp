@@ -5,6 +5,7 @@
 // its own file (truth_path), never from the tracker.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <cstring>
 #include <thread>
@@ -24,6 +25,21 @@ struct Sample {
   TimeNs t_ns = 0;
   std::array<Pose, kHandJointCount> T_local_joint;
 };
+
+// Every frame: when, and whether the hand was active.
+struct Frame {
+  TimeNs t_ns = 0;
+  bool active = false;
+};
+
+// When the hand was inactive, as offsets (s) from the first frame.
+std::vector<double> inactive_after_start(const std::vector<Frame>& frames) {
+  std::vector<double> out;
+  for (const Frame& f : frames) {
+    if (!f.active) out.push_back(static_cast<double>(f.t_ns - frames.front().t_ns) * 1e-9);
+  }
+  return out;
+}
 
 class LayerLiveGloves : public ::testing::Test {
  protected:
@@ -45,7 +61,8 @@ class LayerLiveGloves : public ::testing::Test {
 };
 
 // Runs a headless app for `seconds`, locating `hand` each frame in LOCAL.
-std::vector<Sample> run_app(Handedness hand, double seconds, XrHandTrackingLatencyPROPRIO* latency) {
+std::vector<Sample> run_app(Handedness hand, double seconds, XrHandTrackingLatencyPROPRIO* latency,
+                            std::vector<Frame>* frames = nullptr) {
   std::vector<Sample> samples;
   XrInstance instance = XR_NULL_HANDLE;
   const char* exts[] = {XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_MND_HEADLESS_EXTENSION_NAME,
@@ -110,6 +127,7 @@ std::vector<Sample> run_app(Handedness hand, double seconds, XrHandTrackingLaten
     li.baseSpace = local;
     li.time = t;
     EXPECT_EQ(locate(tracker, &li, &locs), XR_SUCCESS);
+    if (frames) frames->push_back({mx::monotonic_ns_from_xr_time(t), locs.isActive == XR_TRUE});
     if (locs.isActive && joints[0].locationFlags == 0xFu) {
       Sample s;
       s.t_ns = mx::monotonic_ns_from_xr_time(t);
@@ -157,11 +175,19 @@ TEST_F(LayerLiveGloves, AnEmulatedStretchGloveOnATrackedWrist) {
   std::snprintf(offsets, sizeof offsets,
                 "wrist_offset_position_m = [%.9f, %.9f, %.9f]\nwrist_offset_rotation_deg = [%.9f, %.9f, %.9f]\n",
                 T_tracker_wrist.p.x(), T_tracker_wrist.p.y(), T_tracker_wrist.p.z(), r.x(), r.y(), r.z());
-  use_config("[layer]\nmax_prediction_ms = 100\n[[source]]\ntype = \"glove\"\ninput = \"emulated\"\nsubject = 11\n"
-             "hands = [\"right\"]\nwrist = \"tracker\"\n" + std::string(offsets) + "truth_path = \"" +
-             truth_file.string() + "\"\n");
+  // The board's cable comes out 2.5 s in, for 1 s.
+  use_config("[layer]\nmax_prediction_ms = 100\nstale_timeout_ms = 200\n[[source]]\ntype = \"glove\"\n"
+             "input = \"emulated\"\nsubject = 11\nhands = [\"right\"]\nwrist = \"tracker\"\n" + std::string(offsets) +
+             "truth_path = \"" + truth_file.string() + "\"\nunplug_s = [2.5, 1.0]\n");
   XrHandTrackingLatencyPROPRIO latency{};
-  const auto served = run_app(Handedness::right, 4.0, &latency);
+  std::vector<Frame> frames;
+  const auto served = run_app(Handedness::right, 5.5, &latency, &frames);
+  // Inactive while unplugged (once the stale timeout passed), tracked again after.
+  const auto gaps = inactive_after_start(frames);
+  EXPECT_TRUE(std::any_of(gaps.begin(), gaps.end(), [](double s) { return s > 2.8 && s < 3.5; }))
+      << "the hand goes inactive while the board is unplugged";
+  EXPECT_FALSE(std::any_of(gaps.begin(), gaps.end(), [](double s) { return s > 4.2; }))
+      << "and comes back once it is plugged in again";
   ASSERT_GT(served.size(), 100u) << "tracked poses served (the layer attaches its tracker action after 90 frames)";
   // The wrist is the tracker's, composed with the offset: exactly the mock's wrist.
   for (const Sample& s : served) {
@@ -184,6 +210,31 @@ TEST_F(LayerLiveGloves, AnEmulatedStretchGloveOnATrackedWrist) {
   EXPECT_GE(latency.poseCount, served.size());
 }
 
+// Runs in a child process (below): a loaded plugin stays loaded for the
+// process's life, and this stand-in must not replace the real vist plugin for
+// the other tests. Prints what failed; true when all held.
+bool head_provider_matches_the_mock_view() {
+  const auto served = run_app(Handedness::right, 1.5, nullptr);
+  if (served.size() < 50) {
+    std::fprintf(stderr, "only %zu tracked poses served\n", served.size());
+    return false;
+  }
+  // The source's frame is LOCAL moved 0.1 m down; the served joint is then the
+  // head in LOCAL, whatever the offset: T_local_source * T_source_head.
+  for (const Sample& s : served) {
+    const XrTime t = mx::xr_time_from_monotonic_ns(s.t_ns);
+    const Pose view = from_xr(mx::to_xr(mx::locate_motion(XR_REFERENCE_SPACE_TYPE_VIEW, mx::kIdentityPose,
+                                                          XR_REFERENCE_SPACE_TYPE_LOCAL, mx::kIdentityPose, t)
+                                            .pose));
+    const double dp = (s.T_local_joint[0].p - view.p).norm(), dq = angle_between(s.T_local_joint[0].q, view.q);
+    if (dp > 0.001 || dq > 0.002) {
+      std::fprintf(stderr, "at %lld ns: head off by %.4f m, %.4f rad\n", static_cast<long long>(s.t_ns), dp, dq);
+      return false;
+    }
+  }
+  return true;
+}
+
 TEST_F(LayerLiveGloves, TheHeadProviderGivesTheRuntimesViewAtTheAskedMonotonicTime) {
   // A stand-in vist plugin serves, as every joint, the head pose the layer's
   // provider gave it for each CLOCK_MONOTONIC instant it asked about. The mock's
@@ -192,34 +243,32 @@ TEST_F(LayerLiveGloves, TheHeadProviderGivesTheRuntimesViewAtTheAskedMonotonicTi
   ::setenv("PROPRIO_PLUGIN_DIR", PROPRIO_HEAD_PROBE_PLUGIN_DIR, 1);
   use_config("[[source]]\ntype = \"vist\"\ninput = \"emulated\"\nspace = \"local\"\n"
              "offset_position_m = [0.0, -0.1, 0.0]\nhands = [\"right\"]\n");
-  const auto served = run_app(Handedness::right, 1.5, nullptr);
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_EXIT(std::exit(head_provider_matches_the_mock_view() ? 0 : 1), ::testing::ExitedWithCode(0), "");
   ::unsetenv("PROPRIO_PLUGIN_DIR");
-  ASSERT_GT(served.size(), 50u);
-  // The source's frame is LOCAL moved 0.1 m down; the served joint is then the
-  // head in LOCAL, whatever the offset: T_local_source * T_source_head.
-  for (const Sample& s : served) {
-    const XrTime t = mx::xr_time_from_monotonic_ns(s.t_ns);
-    const Pose view = from_xr(mx::to_xr(
-        mx::locate_motion(XR_REFERENCE_SPACE_TYPE_VIEW, mx::kIdentityPose, XR_REFERENCE_SPACE_TYPE_LOCAL,
-                          mx::kIdentityPose, t).pose));
-    ASSERT_LT((s.T_local_joint[0].p - view.p).norm(), 0.001) << "at " << s.t_ns;
-    ASSERT_LT(angle_between(s.T_local_joint[0].q, view.q), 0.002);
-  }
 }
 
 TEST_F(LayerLiveGloves, AnEmulatedVistGloveSeenFromTheMovingHeadset) {
   // The IMU board's emulator and a camera rendering the markers from where the
   // runtime says the headset was at each capture (the mock's VIEW sways and turns).
   const auto truth_file = dir_.path() / "vist_truth.csv";
-  use_config("[layer]\nmax_prediction_ms = 100\n[[source]]\ntype = \"vist\"\ninput = \"emulated\"\nspace = \"local\"\n"
-             "subject = 5\nhands = [\"right\"]\ntruth_path = \"" + truth_file.string() + "\"\n");
+  // The IMU board's cable comes out 3 s in, for 1.5 s.
+  use_config("[layer]\nmax_prediction_ms = 100\nstale_timeout_ms = 200\n[[source]]\ntype = \"vist\"\n"
+             "input = \"emulated\"\nspace = \"local\"\nsubject = 5\nhands = [\"right\"]\ntruth_path = \"" +
+             truth_file.string() + "\"\nunplug_s = [3.0, 1.5]\n");
   XrHandTrackingLatencyPROPRIO latency{};
-  const auto served = run_app(Handedness::right, 6.0, &latency);
+  std::vector<Frame> frames;
+  const auto served = run_app(Handedness::right, 8.0, &latency, &frames);
+  const auto gaps = inactive_after_start(frames);
+  EXPECT_TRUE(std::any_of(gaps.begin(), gaps.end(), [](double s) { return s > 3.4 && s < 4.5; }))
+      << "the hand goes inactive while the IMU board is unplugged";
+  EXPECT_FALSE(std::any_of(gaps.begin(), gaps.end(), [](double s) { return s > 6.0; }))
+      << "and is tracked again once it is back";
   ASSERT_GT(served.size(), 100u) << "tracked poses served";
   const auto truth = layer_test::read_truth(truth_file);
   ASSERT_GT(truth.size(), 100u) << "the emulated wearer wrote its truth";
-  // The tracker needs a moment to acquire: score the last half of the run.
-  const TimeNs from_ns = served[served.size() / 2].t_ns;
+  // Scored after the replug and the re-acquisition.
+  const TimeNs from_ns = frames.front().t_ns + 6 * kNsPerSecond;
   double sum = 0.0;
   std::size_t n = 0;
   for (const Sample& s : served) {
@@ -229,7 +278,7 @@ TEST_F(LayerLiveGloves, AnEmulatedVistGloveSeenFromTheMovingHeadset) {
     for (std::size_t i = 0; i < kHandJointCount; ++i) sum += (s.T_local_joint[i].p - t->T_world_joint[i].p).norm();
     n += kHandJointCount;
   }
-  ASSERT_GT(n, 50u * kHandJointCount);
+  ASSERT_GT(n, 30u * kHandJointCount);
   const double error_m = sum / static_cast<double>(n);
   std::printf("emulated VIST through the layer: all-joint error %.1f mm mean over %zu joints; %llu poses served; "
               "data age p50 <= %.1f ms\n", error_m * 1e3, n, static_cast<unsigned long long>(latency.poseCount),

@@ -159,13 +159,13 @@ std::set<std::string> source_keys(SourceType type) {
   switch (type) {
     case SourceType::glove:
       k.insert({"input", "calibration", "hand_length_m", "hand_width_m", "subject", "seed", "model", "layout",
-                "truth_path"});
+                "truth_path", "unplug_s"});
       break;
     case SourceType::sim: k.insert({"protocol", "subject", "seed", "rate_hz"}); break;
     case SourceType::replay: k.insert({"path", "loop"}); break;
     case SourceType::vist:
       k.insert({"input", "path", "loop", "camera", "camera_right", "stereo_calibration", "glove", "imu_path",
-                "imu_serial", "subject", "seed", "truth_path"});
+                "imu_serial", "subject", "seed", "truth_path", "unplug_s"});
       break;
   }
   return k;
@@ -235,6 +235,29 @@ Status parse_wrist(const Config& c, SourceConfig& s) {
   return {};
 }
 
+// unplug_s = [at, duration, at, duration, ...], seconds.
+Status parse_unplugs(const Config& c, SourceConfig& s) {
+  if (!c.contains("unplug_s")) return {};
+  auto v = c.get_doubles("unplug_s");
+  if (!v) return v.error();
+  if (v->size() % 2 != 0 || v->empty() || v->size() > 16) {
+    return make_error(Errc::invalid_argument, c.where("unplug_s") +
+                                                  ": 'unplug_s' takes pairs [at, duration, ...] in seconds (1 to 8 "
+                                                  "pairs), got " + std::to_string(v->size()) + " numbers");
+  }
+  for (std::size_t i = 0; i < v->size(); i += 2) {
+    const double at = (*v)[i], duration = (*v)[i + 1];
+    if (!std::isfinite(at) || !std::isfinite(duration) || at < 0.0 || at > 86400.0 || duration <= 0.0 ||
+        duration > 3600.0) {
+      return make_error(Errc::invalid_argument, c.where("unplug_s") + ": 'unplug_s' pair " +
+                                                    std::to_string(i / 2 + 1) +
+                                                    " needs 0 <= at <= 86400 and 0 < duration <= 3600 seconds");
+    }
+    s.unplugs.push_back({at, duration});
+  }
+  return {};
+}
+
 // The keys each vist input reads (the rest of source_keys(vist) is refused
 // with the input that would read it named).
 Status parse_vist(const Config& c, SourceConfig& s) {
@@ -246,7 +269,7 @@ Status parse_vist(const Config& c, SourceConfig& s) {
   s.input = *input;
   const std::set<std::string> replay{"path", "loop"};
   const std::set<std::string> device{"camera", "camera_right", "stereo_calibration", "imu_path", "imu_serial"};
-  const std::set<std::string> emulated{"subject", "seed", "truth_path"};
+  const std::set<std::string> emulated{"subject", "seed", "truth_path", "unplug_s"};
   const std::set<std::string>& mine = s.input == "replay" ? replay : s.input == "device" ? device : emulated;
   for (const auto* group : {&replay, &device, &emulated}) {
     if (group == &mine) continue;
@@ -297,7 +320,7 @@ Status parse_vist(const Config& c, SourceConfig& s) {
   auto truth = c.get_string_or("truth_path", "");
   if (!truth) return truth.error();
   s.truth_path = *truth;
-  return {};
+  return parse_unplugs(c, s);
 }
 
 Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
@@ -351,6 +374,11 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
     auto truth = c.get_string_or("truth_path", "");
     if (!truth) return truth.error().with_context(where);
     s.truth_path = *truth;
+    if (c.contains("unplug_s") && s.input != "emulated") {
+      return make_error(Errc::invalid_argument,
+                        c.where("unplug_s") + ": 'unplug_s' applies only to input = \"emulated\"");
+    }
+    if (auto st = parse_unplugs(c, s); !st) return st.error().with_context(where);
     if (s.input == "device") {
       auto cal = c.get_string("calibration");
       if (!cal) {

@@ -54,6 +54,7 @@ Result<PluginStarted> start_glove(const openxr_layer::SourceConfig& sc, Duration
     stretch_glove_eval::EmulatedGloveSourceOptions eo;
     eo.wearer = std::move(o);
     eo.wearer.truth_path = sc.truth_path;
+    for (const auto& u : sc.unplugs) eo.faults.unplugs.push_back({seconds_to_ns(u.at_s), seconds_to_ns(u.duration_s)});
     auto source = stretch_glove_eval::make_emulated_glove_source(eo);
     if (!source) return source.error();
     return PluginStarted{std::move(*source), std::move(inputs)};

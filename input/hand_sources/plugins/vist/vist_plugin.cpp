@@ -67,6 +67,10 @@ Result<PluginStarted> start_live(const openxr_layer::SourceConfig& sc, DurationN
   e.truth_path = sc.truth_path;
   auto emulated = vist_eval::start_emulated_vist(*glove, e, o, std::move(head));
   if (!emulated) return emulated.error();
+  const TimeNs started_ns = MonotonicClock::instance().now_ns();
+  for (const auto& u : sc.unplugs) {
+    emulated->rig->link().schedule_unplug(started_ns + seconds_to_ns(u.at_s), seconds_to_ns(u.duration_s));
+  }
   return PluginStarted{std::move(emulated->source), std::move(inputs)};
 }
 

@@ -83,6 +83,12 @@ struct SourceConfig {
   // wearer's true joints, written as the emulator runs, for tests and
   // benchmarks; the tracker never sees it. Empty: not written.
   std::string truth_path;
+  // Emulated inputs: the board's cable pulled at each `at` (s after the source
+  // starts) for `duration` (s), to rehearse a live unplug in an app.
+  struct Unplug {
+    double at_s = 0.0, duration_s = 0.0;
+  };
+  std::vector<Unplug> unplugs;
 
   // glove: the stretch-sensing glove. input "sim" = simulated subject
   // (subject, seed above); "emulated" = the same wearer behind the read-out

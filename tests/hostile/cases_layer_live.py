@@ -120,3 +120,38 @@ def _(t):
     r = probe(t, '[[source]]\ntype = "glove"\ninput = "emulated"\nhands = ["right"]\nspace = "local"\n'
                  'truth_path = "' + str(t.path("truth")) + '"\n')
     r.expect(rc=NO_HANDS, err=r"truth")
+
+
+@case("26 unplug_s with an odd count, a negative time or NaN: refused, the key named")
+def _(t):
+    glove = '[[source]]\ntype = "glove"\ninput = "emulated"\n'
+    status(t, glove + 'unplug_s = [1.0]\n').expect(rc={1, 2}, out=r"'unplug_s' takes pairs")
+    status(t, glove + 'unplug_s = [-1.0, 1.0]\n').expect(rc={1, 2}, out=r"'unplug_s' pair 1 needs")
+    status(t, glove + 'unplug_s = [1.0, nan]\n').expect(rc={1, 2}, out=r"layer.toml:4:\d+: element 1 of .*unplug_s.* must be a finite number")
+    status(t, '[[source]]\ntype = "glove"\ninput = "sim"\nunplug_s = [1.0, 1.0]\n').expect(
+        rc={1, 2}, out=r"'unplug_s' applies only to input = \"emulated\"")
+
+
+@case("26 a live vist camera that is a FIFO: refused at start, named; /dev/zero: named, retried, no hang")
+def _(t):
+    fifo = t.fifo("camera.avi")
+    r = probe(t, '[[source]]\ntype = "vist"\ninput = "device"\nspace = "local"\nhands = ["right"]\n'
+                 'camera = "' + str(fifo) + '"\n')
+    r.expect(rc=NO_HANDS, err=r"vist source: .*camera.avi")
+    r = probe(t, '[[source]]\ntype = "vist"\ninput = "device"\nspace = "local"\nhands = ["right"]\n'
+                 'camera = "/dev/zero"\n')
+    r.expect(rc=3, err=r"cannot open camera /dev/zero: .*trying again every 1 s")
+
+
+@case("26 a live vist source with no board and no camera: the app runs, the hand never appears")
+def _(t):
+    r = probe(t, '[[source]]\ntype = "vist"\ninput = "device"\nspace = "local"\nhands = ["right"]\n'
+                 'camera = "/dev/video97"\nimu_path = "/dev/hidraw97"\n', seconds="2")
+    r.expect(rc=3)
+
+
+@case("26 an emulated vist glove with its board unplugged for good: the app runs on, the hand goes away")
+def _(t):
+    r = probe(t, '[[source]]\ntype = "vist"\ninput = "emulated"\nspace = "local"\nhands = ["right"]\n'
+                 'unplug_s = [0.0, 3600]\n', seconds="2")
+    r.expect(rc=3)

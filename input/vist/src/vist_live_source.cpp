@@ -150,8 +150,11 @@ Result<std::unique_ptr<VistLiveSource>> start_vist_devices(const ImuGloveDescrip
                                                            const VistDeviceOptions& devices,
                                                            VistLiveSourceOptions options, HeadPoseProvider head) {
   if (auto s = devices.validate(); !s) return s.error();
+  // A node that is not there yet is a board not plugged in yet (hidraw nodes
+  // appear on plugging in): the driver keeps looking. One that is there but is
+  // not a hidraw node is a configuration error.
   if (!devices.imu.path.empty()) {
-    if (auto s = hid::check_hidraw_node(devices.imu.path); !s) return s.error();
+    if (auto s = hid::check_hidraw_node(devices.imu.path); !s && s.error().code != Errc::not_found) return s.error();
   }
   // The rectification maps are built once here (a bad file is a
   // configuration error) and shared by every camera opened later.

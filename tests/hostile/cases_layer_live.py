@@ -155,3 +155,9 @@ def _(t):
     r = probe(t, '[[source]]\ntype = "vist"\ninput = "emulated"\nspace = "local"\nhands = ["right"]\n'
                  'unplug_s = [0.0, 3600]\n', seconds="2")
     r.expect(rc=3)
+
+
+@case("26 a glove source given two hands: refused, named, the app runs on")
+def _(t):
+    r = probe(t, '[[source]]\ntype = "glove"\ninput = "emulated"\nhands = ["left", "right"]\n')
+    r.expect(rc=NO_HANDS, err=r"glove source: .*a glove source is one glove")

@@ -385,19 +385,20 @@ Result<LiveWearer> prepare_live_wearer(const SimGloveSourceOptions& options) {
   if (!model) return model.error();
   w.model.emplace(std::move(*model));
   w.pipeline.tracker = options.tracker;
-  w.pipeline.tracker.hand = subject->dominant_hand;
+  const Handedness hand = options.hand.value_or(subject->dominant_hand);
+  w.pipeline.tracker.hand = hand;
   w.pipeline.tracker.hand_length_m = subject->hand_length_m;
   w.pipeline.tracker.hand_width_m = subject->hand_width_m;
   w.pipeline.history = options.history;
 
   sim::StretchSessionOptions sess;
-  sess.task_motion.hand = subject->dominant_hand;
+  sess.task_motion.hand = hand;
   sess.exploration_s = 0.0;
   sess.task_s = 24 * 3600.0;
   w.session.emplace(std::move(*live_sim), sess);
 
   if (!options.truth_path.empty()) {
-    auto truth = TruthRecorder::open(options.truth_path, *shape, subject->dominant_hand,
+    auto truth = TruthRecorder::open(options.truth_path, *shape, hand,
                                      w.pipeline.tracker.T_world_wrist_fixed, options.truth_every);
     if (!truth) return truth.error();
     w.truth = std::move(*truth);

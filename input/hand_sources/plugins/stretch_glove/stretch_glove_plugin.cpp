@@ -16,6 +16,11 @@ namespace {
 // sc.model is always set: the host fills in the shipped model (hand_sources.cpp).
 Result<PluginStarted> start_glove(const openxr_layer::SourceConfig& sc, DurationNs max_prediction_ns,
                                   TrackedPoseProvider* /*poses*/) {
+  if (sc.hands.size() != 1) {
+    return make_error(Errc::invalid_argument,
+                      "a glove source is one glove: give one hand in 'hands' (\"left\" or \"right\"), and a second "
+                      "[[source]] for the other glove");
+  }
   const std::string& model_path = sc.model;
   std::vector<std::filesystem::path> inputs{model_path, stretch_glove::sidecar_path_for(model_path)};
   if (!sc.layout.empty()) inputs.emplace_back(sc.layout);
@@ -42,6 +47,7 @@ Result<PluginStarted> start_glove(const openxr_layer::SourceConfig& sc, Duration
   stretch_glove_eval::SimGloveSourceOptions o;
   o.subject = sc.subject;
   o.seed = sc.seed;
+  o.hand = sc.hands.front();
   o.model = model_path;
   if (!sc.layout.empty()) {
     auto layout = StretchGloveLayout::load(sc.layout);

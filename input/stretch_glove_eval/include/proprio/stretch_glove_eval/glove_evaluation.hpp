@@ -9,6 +9,7 @@
 // is plausible, not measured, and real gloves slip, crease and age.
 #include <array>
 #include <filesystem>
+#include <optional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -92,7 +93,9 @@ struct SimGloveSourceOptions {
   std::filesystem::path model;
   StretchGloveLayout layout = StretchGloveLayout::thesis_default();
   double exploration_s = 60.0;
-  stretch_glove::GloveTrackerOptions tracker;  // hand and size are the subject's
+  // Which hand wears the glove; empty: the subject's dominant hand.
+  std::optional<Handedness> hand;
+  stretch_glove::GloveTrackerOptions tracker;  // size is the subject's, hand as above
   PoseHistoryOptions history;
   // The wearer's true hand (sim::HandTruthWriter CSV), in the source's world
   // and time base: the same hand size and the tracker's wrist (the glove's

@@ -3,6 +3,8 @@
 // recording of two still hands whose poses the tests know exactly.
 #include <unistd.h>
 
+#include <cstdlib>
+
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -45,6 +47,21 @@ inline fs::path write_still_recording(const fs::path& dir, DurationNs span) {
   }
   (void)w->close();
   return file;
+}
+
+// The process environment of a layer test on the mock runtime: the loader
+// finds the mock runtime and this build's layer, nothing of the user's
+// (config, data, mock-runtime switches) leaks in.
+inline void use_mock_runtime_with_layer(const fs::path& home, const char* runtime_json, const char* layer_dir) {
+  ::setenv("XR_RUNTIME_JSON", runtime_json, 1);
+  ::setenv("XR_API_LAYER_PATH", layer_dir, 1);
+  ::setenv("XR_ENABLE_API_LAYERS", "XR_APILAYER_PROPRIO_hand_tracking", 1);
+  for (const char* v : {"PROPRIO_MOCK_RUNTIME_HAND_TRACKING", "PROPRIO_MOCK_RUNTIME_CONTROLLERS",
+                        "PROPRIO_MOCK_RUNTIME_TRACKERS", "PROPRIO_MOCK_RUNTIME_DISCONNECT", "PROPRIO_PLUGIN_DIR"}) {
+    ::unsetenv(v);
+  }
+  ::setenv("XDG_CONFIG_HOME", (home / "config").c_str(), 1);
+  ::setenv("XDG_DATA_HOME", (home / "data").c_str(), 1);
 }
 
 // The CSV an emulated source writes (proprio/sim/hand_truth_writer.hpp): one

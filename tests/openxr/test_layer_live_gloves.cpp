@@ -44,15 +44,7 @@ std::vector<double> inactive_after_start(const std::vector<Frame>& frames) {
 class LayerLiveGloves : public ::testing::Test {
  protected:
   void SetUp() override {
-    ::setenv("XR_RUNTIME_JSON", PROPRIO_MOCK_RUNTIME_JSON, 1);
-    ::setenv("XR_API_LAYER_PATH", PROPRIO_LAYER_MANIFEST_DIR, 1);
-    ::setenv("XR_ENABLE_API_LAYERS", "XR_APILAYER_PROPRIO_hand_tracking", 1);
-    for (const char* v : {"PROPRIO_MOCK_RUNTIME_HAND_TRACKING", "PROPRIO_MOCK_RUNTIME_CONTROLLERS",
-                          "PROPRIO_MOCK_RUNTIME_TRACKERS", "PROPRIO_MOCK_RUNTIME_DISCONNECT"}) {
-      ::unsetenv(v);
-    }
-    ::setenv("XDG_CONFIG_HOME", (dir_.path() / "config").c_str(), 1);
-    ::setenv("XDG_DATA_HOME", (dir_.path() / "data").c_str(), 1);
+    layer_test::use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR);
   }
   void use_config(const std::string& text) {
     ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);

@@ -206,15 +206,7 @@ void expect_hand_on_wrist(const WristJoints& out, Handedness hand, const Pose& T
 class LayerWrist : public ::testing::Test {
  protected:
   void SetUp() override {
-    ::setenv("XR_RUNTIME_JSON", PROPRIO_MOCK_RUNTIME_JSON, 1);
-    ::setenv("XR_API_LAYER_PATH", PROPRIO_LAYER_MANIFEST_DIR, 1);
-    ::setenv("XR_ENABLE_API_LAYERS", "XR_APILAYER_PROPRIO_hand_tracking", 1);
-    for (const char* v : {"PROPRIO_MOCK_RUNTIME_HAND_TRACKING", "PROPRIO_MOCK_RUNTIME_CONTROLLERS",
-                          "PROPRIO_MOCK_RUNTIME_TRACKERS", "PROPRIO_MOCK_RUNTIME_DISCONNECT"}) {
-      ::unsetenv(v);
-    }
-    ::setenv("XDG_CONFIG_HOME", (dir_.path() / "config").c_str(), 1);
-    ::setenv("XDG_DATA_HOME", (dir_.path() / "data").c_str(), 1);
+    layer_test::use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR);
     recording_ = layer_test::write_still_recording(dir_.path(), 60 * kNsPerSecond).string();
   }
   void use_config(const std::string& text) {

@@ -617,6 +617,21 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_suggest_bindings(XrInstance instance,
   });
 }
 
+// Suggests the layer's bindings for every profile the app did not name (a
+// runtime refuses the profiles it does not know: that is no error here).
+void suggest_ours_alone(const Instance& inst, const std::vector<XrPath>& app_profiles) {
+  for (const auto& [profile, list] : inst.our_bindings) {
+    if (std::find(app_profiles.begin(), app_profiles.end(), profile) != app_profiles.end()) continue;
+    auto s = xr_struct<XrInteractionProfileSuggestedBinding>(XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING);
+    s.interactionProfile = profile;
+    s.countSuggestedBindings = static_cast<uint32_t>(list.size());
+    s.suggestedBindings = list.data();
+    if (const XrResult r = inst.next.suggest_bindings(inst.handle, &s); XR_FAILED(r)) {
+      logger().debug("Proprio layer: the runtime refused the wrist bindings for a profile ({})", static_cast<int>(r));
+    }
+  }
+}
+
 XRAPI_ATTR XrResult XRAPI_CALL layer_attach_action_sets(XrSession session, const XrSessionActionSetsAttachInfo* info) {
   return guarded("xrAttachSessionActionSets", [&] {
     Instance* inst;
@@ -643,16 +658,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_attach_action_sets(XrSession session, const
     }
     // Profiles the app did not suggest for get ours alone (suggesting after an
     // attach is an error, so this is the last chance).
-    for (const auto& [profile, list] : inst->our_bindings) {
-      if (std::find(app_profiles.begin(), app_profiles.end(), profile) != app_profiles.end()) continue;
-      auto s = xr_struct<XrInteractionProfileSuggestedBinding>(XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING);
-      s.interactionProfile = profile;
-      s.countSuggestedBindings = static_cast<uint32_t>(list.size());
-      s.suggestedBindings = list.data();
-      if (const XrResult r = inst->next.suggest_bindings(inst->handle, &s); XR_FAILED(r)) {
-        logger().debug("Proprio layer: the runtime refused the wrist bindings for a profile ({})", static_cast<int>(r));
-      }
-    }
+    suggest_ours_alone(*inst, app_profiles);
     std::vector<XrActionSet> sets(info->actionSets, info->actionSets + info->countActionSets);
     sets.push_back(inst->action_set);
     XrSessionActionSetsAttachInfo down = *info;
@@ -720,13 +726,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_begin_frame(XrSession session, const XrFram
       auto attach = xr_struct<XrSessionActionSetsAttachInfo>(XR_TYPE_SESSION_ACTION_SETS_ATTACH_INFO);
       attach.countActionSets = 1;
       attach.actionSets = &inst->action_set;
-      for (const auto& [profile, list] : inst->our_bindings) {
-        auto s = xr_struct<XrInteractionProfileSuggestedBinding>(XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING);
-        s.interactionProfile = profile;
-        s.countSuggestedBindings = static_cast<uint32_t>(list.size());
-        s.suggestedBindings = list.data();
-        (void)inst->next.suggest_bindings(inst->handle, &s);
-      }
+      suggest_ours_alone(*inst, {});
       if (const XrResult ar = inst->next.attach_action_sets(session, &attach); XR_SUCCEEDED(ar)) {
         logger().info("Proprio layer: the app attached no action sets in its first {} frames; the layer's wrist "
                       "actions are attached alone", kAttachAloneAfterFrames);

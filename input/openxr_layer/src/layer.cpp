@@ -10,7 +10,8 @@
 //  - What the layer asks the runtime for itself (the headset's pose for a
 //    head-mounted camera, a wrist from a controller, a tracker or the
 //    runtime's own hand tracking) it asks only when a configured source needs
-//    it, and never disturbs the app's own actions (runtime_poses below).
+//    it, and never disturbs the app's own actions (RuntimeHeadProvider and
+//    "the wrist actions" below).
 #include "proprio/core/xr_ext.hpp"  // first: it switches on XR_USE_TIMESPEC
 
 #include <pthread.h>

@@ -132,7 +132,7 @@ std::vector<Sample> run_app(Handedness hand, double seconds, XrHandTrackingLaten
     EXPECT_EQ(xrEndFrame(session, &fe), XR_SUCCESS);
   }
   if (latency) {
-    *latency = XrHandTrackingLatencyPROPRIO{XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO};
+    *latency = xr_struct<XrHandTrackingLatencyPROPRIO>(XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO);
     EXPECT_EQ(get_latency(tracker, latency), XR_SUCCESS);
   }
   EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);  // stops the sources: the truth file is complete

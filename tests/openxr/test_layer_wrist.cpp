@@ -67,7 +67,9 @@ struct WristApp {
   std::vector<XrStructureType> events_seen;
 
   ~WristApp() {
-    if (instance != XR_NULL_HANDLE) EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+    if (instance != XR_NULL_HANDLE) {
+      EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+    }
   }
   void create(std::vector<const char*> extensions) {
     extensions.push_back(XR_EXT_HAND_TRACKING_EXTENSION_NAME);
@@ -373,7 +375,7 @@ TEST_F(LayerWrist, LatencyHistogramsCountEveryServedPose) {
     active += out.locations.isActive ? 1 : 0;
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
-  XrHandTrackingLatencyPROPRIO l{XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO};
+  auto l = xr_struct<XrHandTrackingLatencyPROPRIO>(XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO);
   XR_OK(get_latency(app.trackers[0], &l));
   EXPECT_GT(active, 0u);
   EXPECT_EQ(l.poseCount, active);
@@ -384,7 +386,7 @@ TEST_F(LayerWrist, LatencyHistogramsCountEveryServedPose) {
   EXPECT_EQ(ready, active);
   EXPECT_EQ(age, active);
   EXPECT_GE(l.maxAgeAtLocateMs, 0.0f);
-  XrHandTrackingLatencyPROPRIO wrong{XR_TYPE_HAND_JOINT_LOCATIONS_EXT};
+  auto wrong = xr_struct<XrHandTrackingLatencyPROPRIO>(XR_TYPE_HAND_JOINT_LOCATIONS_EXT);
   EXPECT_EQ(get_latency(app.trackers[0], &wrong), XR_ERROR_VALIDATION_FAILURE);
   EXPECT_EQ(get_latency(app.trackers[0], nullptr), XR_ERROR_VALIDATION_FAILURE);
 }

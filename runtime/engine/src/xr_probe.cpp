@@ -788,7 +788,8 @@ Result<XrProbeSummary> Probe::summarise(LoopEnd end) {
   for (const auto& h : hands_) summary.hands.emplace_back(h.which, h.total);
   for (const auto& h : hands_) {
     if (!get_latency_ || h.tracker == XR_NULL_HANDLE) continue;
-    XrHandTrackingLatencyPROPRIO l{XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO};
+    XrHandTrackingLatencyPROPRIO l{};
+    l.type = XR_TYPE_HAND_TRACKING_LATENCY_PROPRIO;
     if (!ok(get_latency_(h.tracker, &l), "xrGetHandTrackingLatencyPROPRIO")) continue;
     XrProbeLatency out;
     out.poses = l.poseCount;

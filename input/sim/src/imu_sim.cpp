@@ -14,7 +14,15 @@ namespace {
 
 // Sub-streams of mix_seed(seed, imu): one per random effect, so that turning
 // one effect off (or changing its size) does not shift another's draws.
-enum Stream : std::uint64_t { kMountStream = 0, kTurnOnStream = 1, kJitterStream = 2, kNoiseStream = 3, kWalkStream = 4 };
+enum Stream : std::uint64_t {
+  kMountStream = 0,
+  kTurnOnStream = 1,
+  kJitterStream = 2,
+  kNoiseStream = 3,
+  kWalkStream = 4,
+  kMagIronStream = 5,  // hard/soft iron and the calibration's residual
+  kMagNoiseStream = 6,
+};
 
 Rng stream_rng(std::uint64_t seed, std::size_t imu, Stream s) {
   return Rng(mix_seed(mix_seed(seed, static_cast<std::uint64_t>(imu)), s));
@@ -60,7 +68,85 @@ Error bad_option(const char* field, double value, const char* what) {
   return make_error(Errc::invalid_argument, buf);
 }
 
+Error bad_mag_option(const char* field, double value, const char* what) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "IMU noise option magnetometer.%s = %g is not usable: %s", field, value, what);
+  return make_error(Errc::invalid_argument, buf);
+}
+
+// Per-axis quantiser and overflow of the AK8963, on the chip side (before any
+// calibration). Returns HOFL.
+bool quantise_mag(Vec3& v, const MagnetometerOptions& o) {
+  bool overflow = false;
+  if (o.enable_overflow) {
+    overflow = v.cwiseAbs().maxCoeff() > o.range_T || v.cwiseAbs().sum() >= o.overflow_sum_T;
+  }
+  const double full = static_cast<double>(o.max_count);
+  for (int k = 0; k < 3; ++k) {
+    double counts = v[k] / o.resolution_T_per_lsb;
+    if (o.enable_quantisation) counts = std::nearbyint(counts);
+    if (o.enable_overflow) counts = std::clamp(counts, -full, full);
+    v[k] = counts * o.resolution_T_per_lsb;
+  }
+  return overflow;
+}
+
 }  // namespace
+
+DurationNs MagnetometerOptions::period_ns() const { return seconds_to_ns(1.0 / sample_rate_hz); }
+
+Status MagnetometerOptions::validate() const {
+  if (!std::isfinite(sample_rate_hz) || sample_rate_hz <= 0.0 || sample_rate_hz > 100.0) {
+    return bad_mag_option("sample_rate_hz", sample_rate_hz,
+                          "the AK8963 measures at 100 Hz at most (continuous mode 2); use a rate in (0, 100]");
+  }
+  if (!std::isfinite(resolution_T_per_lsb) || resolution_T_per_lsb <= 0.0) {
+    return bad_mag_option("resolution_T_per_lsb", resolution_T_per_lsb, "it must be > 0 (0.15e-6 for 16-bit output)");
+  }
+  if (max_count <= 0) return bad_mag_option("max_count", max_count, "it must be > 0 (32760 for 16-bit output)");
+  if (!std::isfinite(range_T) || range_T <= 0.0) return bad_mag_option("range_T", range_T, "it must be > 0");
+  if (!std::isfinite(overflow_sum_T) || overflow_sum_T <= 0.0) {
+    return bad_mag_option("overflow_sum_T", overflow_sum_T, "it must be > 0");
+  }
+  const struct {
+    const char* name;
+    double value;
+  } nonneg[] = {{"noise_sigma_T", noise_sigma_T},
+                {"hard_iron_sigma_T", hard_iron_sigma_T},
+                {"soft_iron_scale_sigma", soft_iron_scale_sigma},
+                {"soft_iron_cross_sigma", soft_iron_cross_sigma},
+                {"residual_offset_sigma_T", residual_offset_sigma_T},
+                {"residual_matrix_sigma", residual_matrix_sigma}};
+  for (const auto& f : nonneg) {
+    if (!std::isfinite(f.value) || f.value < 0.0) return bad_mag_option(f.name, f.value, "it must be finite and >= 0");
+  }
+  // Draws are truncated at 3σ; these bounds keep S = I + E and I + D strictly
+  // diagonally dominant, hence invertible, for every draw.
+  if (3.0 * (soft_iron_scale_sigma + 2.0 * soft_iron_cross_sigma) >= 1.0) {
+    return bad_mag_option("soft_iron_scale_sigma", soft_iron_scale_sigma,
+                          "3*(scale_sigma + 2*cross_sigma) must be < 1 so that S stays invertible");
+  }
+  if (9.0 * residual_matrix_sigma >= 1.0) {
+    return bad_mag_option("residual_matrix_sigma", residual_matrix_sigma, "it must be < 1/9 so that I + D stays invertible");
+  }
+  return Status::success();
+}
+
+std::string MagnetometerOptions::describe() const {
+  char buf[600];
+  std::snprintf(buf, sizeof buf,
+                "mag: rate=%.1fHz res=%.3g uT/LSB range=+-%.0f uT (HOFL also at |x|+|y|+|z|>=%.0f uT)%s%s "
+                "noise=%.3g uT%s hard_iron_sigma=%.3g uT%s soft_iron_sigma: scale=%.3g cross=%.3g%s output=%s "
+                "residual: offset=%.3g uT matrix=%.3g%s",
+                sample_rate_hz, resolution_T_per_lsb * 1e6, range_T * 1e6, overflow_sum_T * 1e6,
+                enable_quantisation ? "" : " [no quantisation]", enable_overflow ? "" : " [no overflow]",
+                noise_sigma_T * 1e6, enable_noise ? "" : " [off]", hard_iron_sigma_T * 1e6,
+                enable_hard_iron ? "" : " [off]", soft_iron_scale_sigma, soft_iron_cross_sigma,
+                enable_soft_iron ? "" : " [off]", output == MagnetometerOutput::raw ? "raw" : "calibrated",
+                residual_offset_sigma_T * 1e6, residual_matrix_sigma,
+                enable_residual_calibration_error ? "" : " [off]");
+  return buf;
+}
 
 ImuNoiseOptions ImuNoiseOptions::ideal() {
   ImuNoiseOptions o;
@@ -70,6 +156,12 @@ ImuNoiseOptions ImuNoiseOptions::ideal() {
   o.enable_misalignment = false;
   o.enable_timestamp_jitter = false;
   o.enable_saturation = false;
+  o.magnetometer.enable_noise = false;
+  o.magnetometer.enable_hard_iron = false;
+  o.magnetometer.enable_soft_iron = false;
+  o.magnetometer.enable_residual_calibration_error = false;
+  o.magnetometer.enable_quantisation = false;
+  o.magnetometer.enable_overflow = false;
   return o;
 }
 
@@ -122,7 +214,7 @@ Status ImuNoiseOptions::validate() const {
     return bad_option("difference_step_s", difference_step_s,
                       "use at least 1 ns and less than half the sample period (1e-3 s at 100 Hz)");
   }
-  return Status::success();
+  return magnetometer.validate();
 }
 
 std::string ImuNoiseOptions::describe() const {
@@ -142,7 +234,9 @@ std::string ImuNoiseOptions::describe() const {
       timestamp_jitter_ns * 1e-3, enable_timestamp_jitter ? "" : " [off]", accel_range_mps2,
       accel_range_mps2 / kStandardGravity, gyro_range_radps, rad_to_deg(gyro_range_radps),
       enable_saturation ? "" : " [off]", gravity_mps2, difference_step_s);
-  return buf;
+  std::string out = buf;
+  if (magnetometer.enabled) out += " " + magnetometer.describe();
+  return out;
 }
 
 Result<ImuSimulator> ImuSimulator::create(HandPoseFunction poses, std::vector<PlacedImu> imus, ImuNoiseOptions options,
@@ -169,7 +263,11 @@ Result<ImuSimulator> ImuSimulator::create(HandMotionGenerator& motion, std::vect
 
 ImuSimulator::ImuSimulator(HandPoseFunction poses, std::vector<PlacedImu> imus, ImuNoiseOptions options,
                            std::uint64_t seed, TimeNs first_tick_ns)
-    : poses_(std::move(poses)), options_(options), seed_(seed), first_tick_ns_(first_tick_ns) {
+    : poses_(std::move(poses)),
+      options_(options),
+      seed_(seed),
+      first_tick_ns_(first_tick_ns),
+      magnetic_env_(std::make_shared<const MagneticEnvironment>()) {
   const std::size_t n = imus.size();
   mountings_.resize(n);
   state_.resize(n);
@@ -201,7 +299,37 @@ ImuSimulator::ImuSimulator(HandPoseFunction poses, std::vector<PlacedImu> imus, 
         m.turn_on_bias_accel_mps2[k] = options_.turn_on_bias_accel[k] * truncated_normal(rng, 3.0);
       }
     }
+    {
+      // Every draw is made whatever the switches, in a fixed order, so that
+      // switching one error off leaves the others as they were.
+      const MagnetometerOptions& mo = options_.magnetometer;
+      Rng rng = stream_rng(seed, i, kMagIronStream);
+      Vec3 hard, diag, cross, res_offset;
+      Mat3 res_matrix;
+      for (int k = 0; k < 3; ++k) hard[k] = mo.hard_iron_sigma_T * truncated_normal(rng, 3.0);
+      for (int k = 0; k < 3; ++k) diag[k] = mo.soft_iron_scale_sigma * truncated_normal(rng, 3.0);
+      for (int k = 0; k < 3; ++k) cross[k] = mo.soft_iron_cross_sigma * truncated_normal(rng, 3.0);
+      for (int k = 0; k < 3; ++k) res_offset[k] = mo.residual_offset_sigma_T * truncated_normal(rng, 3.0);
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) res_matrix(r, c) = mo.residual_matrix_sigma * truncated_normal(rng, 3.0);
+      }
+      if (mo.enable_hard_iron) m.mag_hard_iron_T = hard;
+      if (mo.enable_soft_iron) {
+        Mat3 E = diag.asDiagonal();
+        E(0, 1) = E(1, 0) = cross[0];
+        E(0, 2) = E(2, 0) = cross[1];
+        E(1, 2) = E(2, 1) = cross[2];
+        m.mag_soft_iron = Mat3::Identity() + E;
+      }
+      m.mag_calibration_offset_T = m.mag_hard_iron_T;
+      m.mag_calibration_matrix = m.mag_soft_iron;
+      if (mo.enable_residual_calibration_error) {
+        m.mag_calibration_offset_T += res_offset;
+        m.mag_calibration_matrix = (Mat3::Identity() + res_matrix) * m.mag_soft_iron;
+      }
+    }
     ImuState& s = state_[i];
+    s.mag_noise_rng = stream_rng(seed, i, kMagNoiseStream);
     s.jitter_rng = stream_rng(seed, i, kJitterStream);
     s.noise_rng = stream_rng(seed, i, kNoiseStream);
     s.walk_rng = stream_rng(seed, i, kWalkStream);
@@ -227,6 +355,19 @@ std::span<const ImuReading> ImuSimulator::next() {
   const double gyro_step = options_.gyro_bias_step_sigma();
   const double accel_step = options_.accel_bias_step_sigma();
   const Vec3 g_world(0.0, -options_.gravity_mps2, 0.0);
+  const MagnetometerOptions& mo = options_.magnetometer;
+  // The compass samples on the ticks, decimated to its own (lower or equal)
+  // rate: a new sample whenever tick * rate_mag / rate_imu reaches a new integer.
+  bool mag_fresh = false;
+  if (mo.enabled) {
+    const std::int64_t slot = mo.sample_rate_hz >= options_.sample_rate_hz
+                                  ? tick_
+                                  : static_cast<std::int64_t>(std::floor(static_cast<double>(tick_) *
+                                                                         mo.sample_rate_hz / options_.sample_rate_hz));
+    mag_fresh = slot != mag_last_slot_;
+    mag_last_slot_ = slot;
+  }
+  const double mag_noise_sigma = mo.enable_noise ? mo.noise_sigma_T : 0.0;
 
   // The hand at t - h, t, t + h. Without jitter every IMU shares t, so the
   // (costly) pose function runs three times per tick instead of per IMU.
@@ -283,7 +424,24 @@ std::span<const ImuReading> ImuSimulator::next() {
     r.sample.sensor_id = m.sensor_id;
     r.sample.gyro_radps = angular_rate + s.gyro_bias + gt.gyro_noise_radps;
     r.sample.accel_mps2 = specific_force + s.accel_bias + gt.accel_noise_mps2;
-    r.sample.mag_T.reset();  // the thesis's tracker uses no magnetometer (it fails near haptic devices)
+    r.mag_fresh = mag_fresh;
+    if (!mo.enabled) {
+      r.sample.mag_T.reset();  // VIST's glove has no compass (it fails near haptic devices, Lee 2021 §4.7)
+      r.mag_overflow = false;
+    } else if (mag_fresh) {
+      // Measured at this reading's own instant; the pose `at` is already there.
+      gt.mag_time_ns = t;
+      gt.mag_field_world_T = magnetic_env_->field_world_T(T_world_imu.p, t, &at);
+      gt.mag_field_T = T_world_imu.q.conjugate() * gt.mag_field_world_T;
+      gt.mag_earth_T = T_world_imu.q.conjugate() * magnetic_env_->earth_field_world_T();
+      gt.mag_noise_T = mag_noise_sigma > 0.0 ? Vec3(mag_noise_sigma * normal3(s.mag_noise_rng)) : Vec3(Vec3::Zero());
+      Vec3 chip = m.mag_soft_iron * gt.mag_field_T + m.mag_hard_iron_T + gt.mag_noise_T;
+      r.mag_overflow = quantise_mag(chip, mo);
+      if (mo.output == MagnetometerOutput::calibrated) {
+        chip = m.mag_calibration_matrix.inverse() * (chip - m.mag_calibration_offset_T);
+      }
+      r.sample.mag_T = chip;
+    }
     r.gyro_saturated = options_.enable_saturation && clip(r.sample.gyro_radps, options_.gyro_range_radps);
     r.accel_saturated = options_.enable_saturation && clip(r.sample.accel_mps2, options_.accel_range_mps2);
 
@@ -303,8 +461,18 @@ std::string ImuSimulator::describe() const {
     std::snprintf(buf, sizeof buf, "\n  imu %u on %s: misalignment %.2f deg", static_cast<unsigned>(m.sensor_id),
                   std::string(to_string(m.segment)).c_str(), rad_to_deg(m.misalignment_rad));
     out += buf;
+    if (options_.magnetometer.enabled) {
+      std::snprintf(buf, sizeof buf, ", mag hard iron (%.1f, %.1f, %.1f) uT", m.mag_hard_iron_T.x() * 1e6,
+                    m.mag_hard_iron_T.y() * 1e6, m.mag_hard_iron_T.z() * 1e6);
+      out += buf;
+    }
   }
+  if (options_.magnetometer.enabled) out += "\n" + magnetic_env_->describe();
   return out;
+}
+
+void ImuSimulator::set_magnetic_environment(std::shared_ptr<const MagneticEnvironment> environment) {
+  magnetic_env_ = environment ? std::move(environment) : std::make_shared<const MagneticEnvironment>();
 }
 
 Result<std::vector<StreamId>> add_imu_streams(RecordingWriter& writer, const ImuSimulator& sim,
@@ -328,8 +496,18 @@ Result<std::vector<StreamId>> add_imu_streams(RecordingWriter& writer, const Imu
                   o.sample_rate_hz, T.q.w(), T.q.x(), T.q.y(), T.q.z(), T.p.x(), T.p.y(), T.p.z(),
                   o.gyro_noise_density, o.accel_noise_density, o.gyro_bias_random_walk, o.accel_bias_random_walk,
                   o.gyro_range_radps, o.accel_range_mps2);
+    std::string meta_json = meta;
+    if (o.magnetometer.enabled) {
+      // Nominal compass specification only; the drawn irons are ground truth.
+      char mag[256];
+      std::snprintf(mag, sizeof mag, ",\"mag_rate_hz\":%.17g,\"mag_resolution_T\":%.17g,\"mag_range_T\":%.17g,"
+                    "\"mag_output\":\"%s\"",
+                    o.magnetometer.sample_rate_hz, o.magnetometer.resolution_T_per_lsb, o.magnetometer.range_T,
+                    o.magnetometer.output == MagnetometerOutput::raw ? "raw" : "calibrated");
+      meta_json.insert(meta_json.size() - 1, mag);
+    }
     const std::string name = std::string(name_prefix) + std::to_string(m.sensor_id);
-    auto id = writer.add_stream(StreamKind::imu, name, meta);
+    auto id = writer.add_stream(StreamKind::imu, name, meta_json);
     if (!id.ok()) return id.error().with_context("declaring IMU stream '" + name + "'");
     ids.push_back(*id);
   }

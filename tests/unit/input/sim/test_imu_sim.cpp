@@ -585,3 +585,356 @@ TEST(ImuSimGlove, LeftHandGyroMatchesTheGenerator) {
     }
   }
 }
+
+// ---- Magnetometer (AK8963) ----
+
+namespace {
+
+ImuNoiseOptions with_mag(ImuNoiseOptions o) {
+  o.magnetometer.enabled = true;
+  return o;
+}
+
+// The compass's errors only; the accelerometer and gyro as ideal() leaves
+// them, so the IMU sits exactly on the grid and still.
+ImuNoiseOptions mag_errors_only() {
+  ImuNoiseOptions o = ImuNoiseOptions::ideal();
+  o.magnetometer = MagnetometerOptions{};
+  o.magnetometer.enabled = true;
+  return o;
+}
+
+// A dipole placed so that the field it makes at p_world is exactly b_world:
+// at r = p − dipole, B = k/r³ (3uuᵀ − I) m, an invertible matrix (eigenvalues 2, −1).
+MagneticDipole dipole_making(const Vec3& b_world, const Vec3& p_world, const Vec3& r) {
+  const double d = r.norm();
+  const Vec3 u = r / d;
+  const Mat3 A = kMu0Over4Pi / (d * d * d) * (3.0 * u * u.transpose() - Mat3::Identity());
+  MagneticDipole dip;
+  dip.name = "made to measure";
+  dip.moment_static_Am2 = A.inverse() * b_world;
+  dip.T_world_dipole = fixed_pose(Pose{Quat::Identity(), Vec3(p_world - r)});
+  dip.min_distance_m = 1e-6;
+  return dip;
+}
+
+}  // namespace
+
+TEST(ImuSimMagnetometer, OffByDefaultAndValidated) {
+  const ImuNoiseOptions o;
+  EXPECT_FALSE(o.magnetometer.enabled);
+  EXPECT_TRUE(o.magnetometer.validate().ok());
+  auto sim = make(still_hand(), o);
+  for (const auto& r : sim.next()) {
+    EXPECT_FALSE(r.sample.mag_T.has_value());
+    EXPECT_FALSE(r.mag_fresh);
+  }
+  EXPECT_EQ(o.describe().find("mag:"), std::string::npos);
+  ImuNoiseOptions fast = with_mag(o);
+  fast.magnetometer.sample_rate_hz = 200.0;
+  const auto s = fast.validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().message.find("magnetometer.sample_rate_hz"), std::string::npos) << s.error().message;
+  ImuNoiseOptions singular = with_mag(o);
+  singular.magnetometer.soft_iron_scale_sigma = 0.4;
+  EXPECT_FALSE(singular.validate().ok());
+  EXPECT_NE(with_mag(o).describe().find("mag:"), std::string::npos);
+}
+
+TEST(ImuSimMagnetometer, IdealCompassReadsTheEarthFieldInItsOwnFrame) {
+  auto sim = make(still_hand(), with_mag(ImuNoiseOptions::ideal()));
+  const EarthFieldOptions earth;
+  const Vec3 b_world = earth_field_world_T(earth);
+  for (int k = 0; k < 5; ++k) {
+    const auto readings = sim.next();
+    for (std::size_t i = 0; i < readings.size(); ++i) {
+      const auto& gt = sim.ground_truth()[i];
+      ASSERT_TRUE(readings[i].sample.mag_T.has_value());
+      const Vec3 expected = gt.T_world_imu.q.conjugate() * b_world;
+      EXPECT_LT((*readings[i].sample.mag_T - expected).norm(), 1e-18);
+      EXPECT_LT((gt.mag_field_T - expected).norm(), 1e-18);
+      EXPECT_LT((gt.mag_earth_T - expected).norm(), 1e-18);
+      // Back in the world, the reading has the configured dip.
+      EXPECT_NEAR(inclination_of(gt.T_world_imu.q * *readings[i].sample.mag_T), earth.inclination_rad, 1e-9);
+      EXPECT_FALSE(readings[i].mag_overflow);
+      EXPECT_TRUE(readings[i].mag_fresh);
+    }
+  }
+}
+
+TEST(ImuSimMagnetometer, HardAndSoftIronAreAppliedAsDocumented) {
+  ImuNoiseOptions o = mag_errors_only();
+  o.magnetometer.enable_noise = false;
+  o.magnetometer.enable_quantisation = false;
+  o.magnetometer.enable_overflow = false;
+  auto sim = make(still_hand(), o, 21);
+  const auto readings = sim.next();
+  for (std::size_t i = 0; i < readings.size(); ++i) {
+    const auto& m = sim.mountings()[i];
+    const auto& gt = sim.ground_truth()[i];
+    // Drawn, non-trivial, within the 3σ truncation, S symmetric.
+    EXPECT_GT(m.mag_hard_iron_T.norm(), 0.0);
+    EXPECT_LE(m.mag_hard_iron_T.cwiseAbs().maxCoeff(), 3.0 * o.magnetometer.hard_iron_sigma_T);
+    EXPECT_GT((m.mag_soft_iron - Mat3::Identity()).norm(), 0.0);
+    EXPECT_LT((m.mag_soft_iron - m.mag_soft_iron.transpose()).norm(), 1e-18);
+    // m_raw = S·B + b.
+    const Vec3 expected = m.mag_soft_iron * gt.mag_field_T + m.mag_hard_iron_T;
+    EXPECT_LT((*readings[i].sample.mag_T - expected).norm(), 1e-18) << "imu " << i;
+  }
+  EXPECT_NE(sim.mountings()[0].mag_hard_iron_T, sim.mountings()[1].mag_hard_iron_T);
+
+  // Calibrated output with a perfect calibration gives back the true field.
+  ImuNoiseOptions perfect = o;
+  perfect.magnetometer.output = MagnetometerOutput::calibrated;
+  perfect.magnetometer.enable_residual_calibration_error = false;
+  auto cal = make(still_hand(), perfect, 21);
+  const auto rc = cal.next();
+  for (std::size_t i = 0; i < rc.size(); ++i) {
+    EXPECT_LT((*rc[i].sample.mag_T - cal.ground_truth()[i].mag_field_T).norm(), 1e-17);
+  }
+  // With the residual: C⁻¹(m_raw − b̂), a small error of about a percent.
+  ImuNoiseOptions residual = perfect;
+  residual.magnetometer.enable_residual_calibration_error = true;
+  auto res = make(still_hand(), residual, 21);
+  const auto rr = res.next();
+  double worst = 0.0;
+  for (std::size_t i = 0; i < rr.size(); ++i) {
+    const auto& m = res.mountings()[i];
+    const auto& gt = res.ground_truth()[i];
+    EXPECT_EQ(m.mag_hard_iron_T, sim.mountings()[i].mag_hard_iron_T) << "same seed, same irons";
+    const Vec3 raw = m.mag_soft_iron * gt.mag_field_T + m.mag_hard_iron_T;
+    const Vec3 expected = m.mag_calibration_matrix.inverse() * (raw - m.mag_calibration_offset_T);
+    EXPECT_LT((*rr[i].sample.mag_T - expected).norm(), 1e-17);
+    worst = std::max(worst, (*rr[i].sample.mag_T - gt.mag_field_T).norm());
+  }
+  EXPECT_GT(worst, 0.0);
+  EXPECT_LT(worst, 0.1 * EarthFieldOptions{}.magnitude_T);
+}
+
+TEST(ImuSimMagnetometer, QuantisesTo015MicroteslaPerLsb) {
+  ImuNoiseOptions o = mag_errors_only();
+  ImuNoiseOptions smooth = o;
+  smooth.magnetometer.enable_quantisation = false;
+  auto q = make(still_hand(), o, 5);
+  auto c = make(still_hand(), smooth, 5);
+  for (int k = 0; k < 20; ++k) {
+    const auto rq = q.next();
+    const auto rs = c.next();
+    for (std::size_t i = 0; i < rq.size(); ++i) {
+      const Vec3 counts = *rq[i].sample.mag_T / 0.15e-6;
+      for (int a = 0; a < 3; ++a) EXPECT_NEAR(counts[a], std::round(counts[a]), 1e-6);
+      EXPECT_LE((*rq[i].sample.mag_T - *rs[i].sample.mag_T).cwiseAbs().maxCoeff(), 0.075e-6 + 1e-15);
+    }
+  }
+}
+
+TEST(ImuSimMagnetometer, OverflowClampsAndSetsHofl) {
+  const auto imus = test_imus();
+  struct Case {
+    Vec3 b_imu_T;
+    bool hofl;
+    bool clamped;
+  };
+  const Case cases[] = {
+      {Vec3(3000e-6, -2000e-6, 0.0), true, false},   // no axis past 4800 µT, but |x|+|y|+|z| = 5000 >= 4912
+      {Vec3(2000e-6, 2000e-6, 500e-6), false, false},  // 4500 µT in all
+      {Vec3(-4850e-6, 0.0, 0.0), true, false},       // past the ±4800 µT range
+      {Vec3(0.0, 6000e-6, 0.0), true, true},         // past the registers' ±32760 LSB
+  };
+  for (const Case& c : cases) {
+    ImuNoiseOptions o = mag_errors_only();
+    o.magnetometer.enable_noise = false;
+    o.magnetometer.enable_hard_iron = false;
+    o.magnetometer.enable_soft_iron = false;
+    auto sim = make(still_hand(), o, 3);
+    sim.next();  // learn where IMU 0 is
+    const Pose T_world_imu = sim.ground_truth()[0].T_world_imu;
+    EarthFieldOptions none;
+    none.magnitude_T = 0.0;
+    auto env = std::make_shared<MagneticEnvironment>(*MagneticEnvironment::create(none));
+    ASSERT_TRUE(env->add_dipole(dipole_making(T_world_imu.q * c.b_imu_T, T_world_imu.p, Vec3(0.0, 0.3, 0.4))).ok());
+    sim.set_magnetic_environment(env);
+    const auto r = sim.next();
+    EXPECT_LT((sim.ground_truth()[0].mag_field_T - c.b_imu_T).norm(), 1e-12) << "the dipole makes the wanted field";
+    EXPECT_EQ(r[0].mag_overflow, c.hofl) << c.b_imu_T.transpose();
+    const double full = 32760 * 0.15e-6;
+    if (c.clamped) {
+      EXPECT_NEAR(r[0].sample.mag_T->y(), full, 1e-15);
+    } else {
+      EXPECT_LT((*r[0].sample.mag_T - c.b_imu_T).cwiseAbs().maxCoeff(), 0.075e-6 + 1e-15);
+    }
+  }
+}
+
+TEST(ImuSimMagnetometer, SamplesAtMost100HzAndHoldsBetween) {
+  ImuNoiseOptions o = with_mag(ImuNoiseOptions{});
+  o.sample_rate_hz = 200.0;  // the FTM board reads its IMUs at 200 Hz (Lee 2021, §3.2.1)
+  HandMotionOptions mo;
+  mo.seed = 4;
+  HandMotionGenerator gen(model(), mo);
+  auto sim = ImuSimulator::create(gen, test_imus(), o, 9, 3 * kNsPerSecond);
+  ASSERT_TRUE(sim.ok());
+  std::vector<Vec3> last(sim->imu_count());
+  int fresh = 0;
+  int changed = 0;
+  for (int k = 0; k < 200; ++k) {
+    const auto r = sim->next();
+    EXPECT_EQ(r[0].mag_fresh, k % 2 == 0) << k;
+    if (r[0].mag_fresh) ++fresh;
+    for (std::size_t i = 0; i < r.size(); ++i) {
+      const auto& gt = sim->ground_truth()[i];
+      if (r[i].mag_fresh) {
+        EXPECT_EQ(gt.mag_time_ns, r[i].time_ns);
+        // Noise is only 2 LSB, so a new sample may repeat the last one by chance; count them.
+        if (k > 0 && *r[i].sample.mag_T != last[i]) ++changed;
+      } else {
+        EXPECT_EQ(*r[i].sample.mag_T, last[i]) << "held between samples";
+        EXPECT_LT(gt.mag_time_ns, r[i].time_ns);
+      }
+      last[i] = *r[i].sample.mag_T;
+    }
+  }
+  EXPECT_EQ(fresh, 100);
+  EXPECT_GT(changed, 0.9 * 99 * 7) << "new samples are new measurements";
+
+  ImuNoiseOptions slow = with_mag(ImuNoiseOptions::ideal());
+  slow.magnetometer.sample_rate_hz = 8.0;  // continuous mode 1
+  auto s8 = make(still_hand(), slow);
+  int fresh8 = 0;
+  for (int k = 0; k < 100; ++k) fresh8 += s8.next()[0].mag_fresh ? 1 : 0;
+  EXPECT_EQ(fresh8, 8) << "one second at 100 Hz ticks";
+}
+
+TEST(ImuSimMagnetometer, FingertipDeviceMattersAt5mmAndNotAt20mm) {
+  // The haptic device's dipole (sized by the thesis's 10 mm rule) at full
+  // current, attached to the IMU's own segment at a distance d, on its axis
+  // (the worst direction) and in its equatorial plane. The full error model
+  // is on, and the reading is compared with the same seed without the device.
+  const std::size_t imu = 3;  // index_proximal
+  auto base = make(still_hand(), mag_errors_only(), 11);
+  base.next();
+  const Vec3 without = *base.next()[imu].sample.mag_T;
+  const HapticDeviceDipoleOptions ho;
+  for (bool on_axis : {true, false}) {
+    for (double d : {0.005, 0.020}) {
+      auto sim = make(still_hand(), mag_errors_only(), 11);
+      const Pose T_segment_imu = sim.mountings()[imu].T_segment_imu;
+      HapticDeviceDipoleOptions placed = ho;
+      // Dipole axis = the IMU's z; the IMU sits d along it, or d beside it.
+      placed.T_tip_device = T_segment_imu * Pose{Quat::Identity(), on_axis ? Vec3(0.0, 0.0, -d) : Vec3(-d, 0.0, 0.0)};
+      auto env = std::make_shared<MagneticEnvironment>();
+      const auto idx = env->add_dipole(haptic_device_dipole(HandJoint::index_proximal, placed));
+      ASSERT_TRUE(idx.ok());
+      ASSERT_TRUE(env->set_current(*idx, 0, ho.full_current_A).ok());
+      sim.set_magnetic_environment(env);
+      sim.next();
+      const Vec3 with = *sim.next()[imu].sample.mag_T;
+      const double change = (with - without).norm();
+      if (d < kHapticSafeDistance_m) {
+        EXPECT_GT(change, kSignificantDisturbance_T) << "d = " << d << (on_axis ? " on axis" : " equatorial");
+      } else {
+        EXPECT_LT(change, kSignificantDisturbance_T) << "d = " << d << (on_axis ? " on axis" : " equatorial");
+      }
+      // Switching the motors off lowers the disturbance (only the magnets are left).
+      ASSERT_TRUE(env->set_current(*idx, sim.next_nominal_time_ns(), 0.0).ok());
+      const Vec3 idle = *sim.next()[imu].sample.mag_T;
+      EXPECT_LT((idle - without).norm(), change + 2e-6) << "noise allowance 2 uT";
+      if (d < kHapticSafeDistance_m) {
+        EXPECT_LT((idle - without).norm(), change);
+      }
+    }
+  }
+}
+
+TEST(ImuSimMagnetometer, DeterministicForASeedAndIndependentOfTheOtherSensors) {
+  auto run = [](std::uint64_t seed, bool mag) {
+    HandMotionOptions mo;
+    mo.seed = 8;
+    HandMotionGenerator gen(model(), mo);
+    ImuNoiseOptions o;
+    o.magnetometer.enabled = mag;
+    auto sim = ImuSimulator::create(gen, test_imus(), o, seed, 2'500 * kNsPerMillisecond);
+    std::vector<unsigned char> bytes;
+    std::vector<double> mags;
+    for (int k = 0; k < 50; ++k) {
+      const auto r = sim->next();
+      const auto b = bytes_of(r);
+      bytes.insert(bytes.end(), b.begin(), b.end());
+      if (mag) {
+        for (const auto& x : r) mags.insert(mags.end(), x.sample.mag_T->data(), x.sample.mag_T->data() + 3);
+      }
+    }
+    return std::make_pair(bytes, mags);
+  };
+  const auto a = run(99, true);
+  EXPECT_EQ(a, run(99, true));
+  EXPECT_NE(a.second, run(100, true).second);
+  EXPECT_EQ(a.first, run(99, false).first) << "the compass draws from its own streams: accel/gyro unchanged";
+}
+
+TEST(ImuSimMagnetometer, RecordingCarriesTheCompass) {
+  proprio::testing_support::TempDir dir;
+  const auto path = dir / "imu_mag.prec";
+  auto sim = make(still_hand(), with_mag(ImuNoiseOptions{}), 4);
+  std::vector<Vec3> written;
+  {
+    auto w = RecordingWriter::create(path);
+    ASSERT_TRUE(w.ok()) << w.error().message;
+    auto ids = add_imu_streams(*w, sim);
+    ASSERT_TRUE(ids.ok()) << ids.error().message;
+    const auto r = sim.next();
+    for (const auto& x : r) written.push_back(*x.sample.mag_T);
+    ASSERT_TRUE(write_imu_readings(*w, *ids, r).ok());
+    ASSERT_TRUE(w->close().ok());
+  }
+  auto reader = RecordingReader::open(path);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  std::size_t n = 0;
+  for (;;) {
+    auto rec = reader->next();
+    ASSERT_TRUE(rec.ok());
+    if (!rec->has_value()) break;
+    const auto& s = std::get<ImuSample>((**rec).payload);
+    ASSERT_TRUE(s.mag_T.has_value());
+    EXPECT_EQ(*s.mag_T, written[s.sensor_id]);
+    ++n;
+  }
+  EXPECT_EQ(n, 7u);
+  const auto* info = reader->find_stream("imu/0");
+  ASSERT_NE(info, nullptr);
+  EXPECT_NE(info->meta.find("\"mag_rate_hz\":100"), std::string::npos) << info->meta;
+  EXPECT_EQ(info->meta.find("hard_iron"), std::string::npos) << "the drawn irons are ground truth";
+}
+
+TEST(ImuSimMagnetometer, ApproachingDrillRaisesTheFieldMagnitude) {
+  // Fig. 4.14-A of Lee 2021: a hand drill brought to the hand makes the
+  // compass's field magnitude jump. Here it comes from 1 m to 10 cm of the
+  // index-proximal IMU in 1 s, holds 1 s and leaves.
+  const std::size_t imu = 3;
+  auto sim = make(still_hand(), with_mag(ImuNoiseOptions::ideal()), 2);
+  sim.next();
+  const Vec3 p_imu = sim.ground_truth()[imu].T_world_imu.p;
+  ScriptedApproach script;
+  script.T_world_far.p = p_imu + Vec3(0.0, 0.0, -1.0);
+  script.T_world_near.p = p_imu + Vec3(0.0, 0.0, -0.1);
+  script.t_start_ns = 200 * kNsPerMillisecond;
+  script.approach_ns = kNsPerSecond;
+  script.hold_ns = kNsPerSecond;
+  script.retreat_ns = kNsPerSecond;
+  auto env = std::make_shared<MagneticEnvironment>();
+  ASSERT_TRUE(env->add_dipole(drill_dipole(script)).ok());
+  sim.set_magnetic_environment(env);
+  const double earth = EarthFieldOptions{}.magnitude_T;
+  double before = 0.0, during = 0.0, after = 0.0;
+  for (int k = 1; k < 400; ++k) {
+    const auto r = sim.next();
+    const double norm = r[imu].sample.mag_T->norm();
+    const TimeNs t = r[imu].time_ns;
+    if (t < script.t_start_ns) before = std::max(before, std::abs(norm - earth));
+    if (t > 1'300 * kNsPerMillisecond && t < 2'100 * kNsPerMillisecond) during = std::max(during, norm);
+    if (t > 3'300 * kNsPerMillisecond) after = std::max(after, std::abs(norm - earth));
+  }
+  EXPECT_LT(before, 1e-6) << "at 1 m the drill adds ~0.2 uT";
+  EXPECT_LT(after, 1e-6);
+  EXPECT_GT(during, 3.0 * earth) << "at 10 cm it adds ~200 uT";
+}

@@ -19,8 +19,23 @@
 //
 // Frames: world is OpenXR (+Y up), so g_world = (0, -9.80665, 0) m/s² and a
 // level IMU at rest reads +9.80665 along world +Y, expressed in its own axes.
+//
+// Optionally (MagnetometerOptions::enabled, off by default) each IMU also has
+// the MPU-9250's AK8963 compass, reading the field of a MagneticEnvironment
+// (magnetic_field.hpp):
+//
+//   m_raw = Q( S · R_world_imuᵀ B_world(p_imu, t) + b + n_m )
+//
+// S the soft-iron matrix, b the hard-iron offset (both drawn per IMU), n_m
+// white noise, Q the 16-bit quantiser (0.15 µT/LSB) with overflow flag. With
+// output = calibrated the reading is Ĉ⁻¹(m_raw − b̂), where Ĉ = (I + D)·S and
+// b̂ = b + δb are what an imperfect hard/soft-iron calibration found (D, δb
+// the residual error). Readings are in the IMU's frame (the accelerometer's
+// axes: the AK8963's own axes are swapped/flipped on the die, which a driver
+// undoes), sample-and-hold between compass samples.
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -31,12 +46,68 @@
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/sim/magnetic_field.hpp"
 
 namespace proprio::sim {
 
 class HandMotionGenerator;
 
 inline constexpr double kStandardGravity = 9.80665;  // m/s², CGPM 1901 (also the datasheet's "g")
+
+enum class MagnetometerOutput : std::uint8_t {
+  raw,         // what the chip gives: hard and soft iron included (a tracker calibrates it itself)
+  calibrated,  // after the simulated imperfect calibration: only its residual error is left
+};
+
+// The AK8963 in the MPU-9250 (AK8963 datasheet; MPU-9250 product
+// specification PS-MPU-9250A-01 rev 1.0, table 3).
+struct MagnetometerOptions {
+  // Off by default: the glove of Lee 2021 ch. 4 (VIST) has no compass, and
+  // every existing user of ImuSimulator expects mag_T to stay empty.
+  bool enabled = false;
+
+  // Continuous measurement mode 2 is 100 Hz, the chip's fastest; mode 1 is
+  // 8 Hz. The compass samples on the IMU ticks, decimated to this rate, and
+  // every reading carries the newest sample (ImuReading::mag_fresh marks new ones).
+  double sample_rate_hz = 100.0;
+  // 16-bit output (CNTL1 BIT = 1): 0.15 µT/LSB, data registers ±32760.
+  double resolution_T_per_lsb = 0.15e-6;
+  std::int32_t max_count = 32760;
+  // Full scale ±4800 µT (MPU-9250 PS). HOFL is set when an axis exceeds it or
+  // when |x|+|y|+|z| >= 4912 µT (the AK8963 datasheet's ST2 note, as we read
+  // it: the sensor can overflow before a register saturates).
+  double range_T = 4800e-6;
+  double overflow_sum_T = 4912e-6;
+
+  // White noise per axis and sample. The datasheets give no noise figure;
+  // 0.3 µT (2 LSB) is an ASSUMPTION of the order hobbyist logs of the part show.
+  double noise_sigma_T = 0.3e-6;
+  // Hard iron per axis (PCB traces, the battery, the glove's own parts),
+  // Gaussian truncated at 3σ. ASSUMED: 15 µT, a third of the Earth field.
+  double hard_iron_sigma_T = 15e-6;
+  // Soft iron S = I + E: diagonal (scale, incl. the chip's unadjusted
+  // sensitivity, ASA) and symmetric off-diagonal (cross-coupling), truncated
+  // at 3σ. ASSUMED: 3 % and 1 %.
+  double soft_iron_scale_sigma = 0.03;
+  double soft_iron_cross_sigma = 0.01;
+  // What a figure-eight ellipsoid fit leaves (output = calibrated only):
+  // offset per axis and a general matrix error D, truncated at 3σ. ASSUMED:
+  // 0.5 µT and 0.5 % (~1 % of the field, the ripple a calibrated norm shows).
+  double residual_offset_sigma_T = 0.5e-6;
+  double residual_matrix_sigma = 0.005;
+  MagnetometerOutput output = MagnetometerOutput::raw;
+
+  bool enable_noise = true;
+  bool enable_hard_iron = true;
+  bool enable_soft_iron = true;
+  bool enable_residual_calibration_error = true;
+  bool enable_quantisation = true;
+  bool enable_overflow = true;  // clamp to ±max_count and set HOFL
+
+  DurationNs period_ns() const;
+  Status validate() const;  // Errc::invalid_argument naming the field ("magnetometer.<field>")
+  std::string describe() const;
+};
 
 struct ImuNoiseOptions {
   double sample_rate_hz = 100.0;  // the thesis's glove samples every IMU at 100 Hz (Lee 2021, §4.2)
@@ -85,6 +156,8 @@ struct ImuNoiseOptions {
 
   double gravity_mps2 = kStandardGravity;
 
+  MagnetometerOptions magnetometer;  // off unless magnetometer.enabled
+
   // Half-step of the central differences that turn the analytic motion into
   // acceleration and angular rate. 1 ms keeps the truncation error
   // (h²/12·|p''''|, ~1e-5 m/s² for a minimum-jerk reach) and the round-off
@@ -101,6 +174,7 @@ struct ImuNoiseOptions {
   bool enable_saturation = true;
 
   // Everything off: readings equal the ground-truth signals, exactly on the grid.
+  // The magnetometer keeps its `enabled` (off), with all its errors off.
   static ImuNoiseOptions ideal();
 
   // Standard deviations per sample that these densities give (0 when the effect is off).
@@ -121,6 +195,9 @@ struct ImuReading {
   ImuSample sample;    // sensor frame; sensor_id = index into the simulator's IMUs
   bool accel_saturated = false;  // some axis was clipped to ±accel_range_mps2
   bool gyro_saturated = false;   // some axis was clipped to ±gyro_range_radps
+  // Compass (only with MagnetometerOptions::enabled; sample.mag_T holds it).
+  bool mag_fresh = false;     // a new compass sample this tick (else the last one, held)
+  bool mag_overflow = false;  // HOFL of the held sample: its value is not valid
 };
 
 // Drawn once per simulator from its seed, per IMU.
@@ -134,6 +211,11 @@ struct ImuMounting {
   double misalignment_rad = 0.0;          // its angle
   Vec3 turn_on_bias_gyro_radps = Vec3::Zero();
   Vec3 turn_on_bias_accel_mps2 = Vec3::Zero();
+  // Compass errors (drawn whatever the switches; zero/identity when switched off).
+  Vec3 mag_hard_iron_T = Vec3::Zero();              // b
+  Mat3 mag_soft_iron = Mat3::Identity();            // S
+  Vec3 mag_calibration_offset_T = Vec3::Zero();     // b̂ (used by output = calibrated)
+  Mat3 mag_calibration_matrix = Mat3::Identity();   // Ĉ
 };
 
 // The truth behind one reading. Never part of what a tracker sees.
@@ -149,6 +231,12 @@ struct ImuGroundTruth {
   Vec3 angular_rate_radps = Vec3::Zero();   // noise-free, bias-free, unclipped, IMU frame
   Vec3 accel_noise_mps2 = Vec3::Zero();     // the white noise drawn for this reading
   Vec3 gyro_noise_radps = Vec3::Zero();
+  // Compass truth of the held sample (unchanged on ticks without a new one).
+  TimeNs mag_time_ns = 0;                  // the instant it was measured
+  Vec3 mag_field_world_T = Vec3::Zero();   // total field at the IMU, world frame
+  Vec3 mag_field_T = Vec3::Zero();         // the same in the IMU frame: an ideal compass's reading
+  Vec3 mag_earth_T = Vec3::Zero();         // the Earth's part alone, IMU frame
+  Vec3 mag_noise_T = Vec3::Zero();         // the white noise drawn for it (chip side, before Q)
 };
 
 // The hand in the world at any time: the simulator evaluates it at each sample
@@ -184,6 +272,13 @@ class ImuSimulator {
   std::uint64_t seed() const noexcept { return seed_; }
   std::string describe() const;
 
+  // The field the compasses read (when enabled). Default: the Earth field of
+  // EarthFieldOptions{} alone; nullptr restores that. The caller may keep a
+  // non-const pointer to change currents between ticks; dipoles attached to
+  // hand joints follow the hand this simulator samples.
+  void set_magnetic_environment(std::shared_ptr<const MagneticEnvironment> environment);
+  const MagneticEnvironment& magnetic_environment() const noexcept { return *magnetic_env_; }
+
  private:
   // Each effect draws from its own stream (mix_seed(seed, imu), then per
   // effect), so switching one effect off leaves the others' draws unchanged.
@@ -193,6 +288,7 @@ class ImuSimulator {
     Rng walk_rng{0};
     Vec3 gyro_bias = Vec3::Zero();
     Vec3 accel_bias = Vec3::Zero();
+    Rng mag_noise_rng{0};
   };
   ImuSimulator(HandPoseFunction poses, std::vector<PlacedImu> imus, ImuNoiseOptions options, std::uint64_t seed,
                TimeNs first_tick_ns);
@@ -206,6 +302,8 @@ class ImuSimulator {
   std::vector<ImuState> state_;  // biases and random streams per IMU
   std::vector<ImuReading> readings_;
   std::vector<ImuGroundTruth> truth_;
+  std::shared_ptr<const MagneticEnvironment> magnetic_env_;
+  std::int64_t mag_last_slot_ = -1;  // decimation of the compass rate from the tick rate
 };
 
 // Declares one stream per IMU, "imu/<sensor_id>", with the mounting and the

@@ -4,6 +4,8 @@
 // stereo calibration that does not rectify to the glove description's rig.
 #include <gtest/gtest.h>
 
+#include <fstream>
+
 #include <chrono>
 #include <functional>
 #include <string>
@@ -98,7 +100,13 @@ TEST(VistLiveSource, ConfigurationErrorsFailTheStart) {
 
   d = absent_devices();
   d.imu.path = (dir / "not_hidraw").string();
-  EXPECT_FALSE(start_vist_devices(glove, d)) << "an explicit HID node must be a hidraw device";
+  std::ofstream(d.imu.path) << "a regular file";
+  EXPECT_FALSE(start_vist_devices(glove, d)) << "an explicit HID node that is there must be a hidraw device";
+
+  // A hidraw node appears when the board is plugged in: one not there yet is waited for.
+  d = absent_devices();
+  d.imu.path = (dir / "hidraw97").string();
+  EXPECT_TRUE(start_vist_devices(glove, d)) << "a board not plugged in yet does not fail the start";
 
   VistLiveSourceOptions bad;
   bad.vision_timeout_s = 0.0;

@@ -3,9 +3,12 @@
 // compass every other one (200/100 Hz), the disturbance detector running.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <vector>
 
+#include "../unit/input/ftm/ftm_hand_synth.hpp"
 #include "../unit/input/ftm/imu_synth.hpp"
+#include "proprio/ftm/ftm_tracker.hpp"
 #include "proprio/ftm/mahony_filter.hpp"
 #include "proprio/ftm/markley.hpp"
 
@@ -57,5 +60,56 @@ void BM_FtmMarkleyAttitude(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_FtmMarkleyAttitude);
+
+// One whole FTM frame (issue 27 target <= 20 µs): 4 IMU samples (compass on
+// every one), 3 bend samples and the wrist tracker's sample pushed, then all
+// 26 joints estimated into a HandPose. The hand moves through 400 distinct
+// poses (2 s at 200 Hz) with calibrated, non-identity mountings.
+void BM_FtmTrackerFrame(benchmark::State& state) {
+  Rng rng(27601);
+  FtmCalibration truth = nominal_ftm_calibration(Handedness::right, 0.19, 0.1);
+  for (auto& q : truth.q_imu_segment) q = hand_synth::random_rotation(rng, 0.4);
+  const HandModel model(HandShape::from_measurements(0.19, 0.1).value());
+  const FtmTrackerOptions options;
+  std::vector<FtmEvent> events;
+  constexpr int kFrames = 400;
+  constexpr std::size_t kPerFrame = kFtmImuCount + kFtmBendCount + 1;
+  const HandAngles a0 = hand_synth::random_tracked_angles(rng, options.synergies);
+  for (int k = 0; k < kFrames; ++k) {
+    hand_synth::HandTruth h;
+    const double s = std::sin(2.0 * M_PI * k / kFrames);
+    for (std::size_t i = 0; i < kHandDofCount; ++i) h.angles[i] = a0[i] * (0.5 + 0.5 * s);
+    h.T_world_wrist = {Quat(Eigen::AngleAxisd(0.5 * s, Vec3::UnitY())), Vec3(0.0, 1.0, 0.1 * s)};
+    hand_synth::tick(events, model, truth, h, k * 5'000'000LL, static_cast<std::uint64_t>(k));
+  }
+  auto tracker = FtmTracker::create(options, truth);
+  if (!tracker.ok()) {
+    state.SkipWithError(tracker.error().message.c_str());
+    return;
+  }
+  HandPose pose;
+  const TimeNs period = kFrames * 5'000'000LL;
+  TimeNs offset = 0;
+  std::size_t f = 0;
+  for (auto _ : state) {
+    for (std::size_t j = 0; j < kPerFrame; ++j) {
+      FtmEvent e = events[f * kPerFrame + j];
+      e.imu.time_ns += offset;
+      e.bend.time_ns += offset;
+      e.wrist.time_ns += offset;
+      tracker->push(e);
+    }
+    tracker->estimate(pose);
+    benchmark::DoNotOptimize(pose);
+    if (++f == kFrames) {
+      f = 0;
+      offset += period;
+    }
+  }
+  state.counters["tracked_joints"] = static_cast<double>(
+      std::count_if(pose.flags.begin(), pose.flags.end(), [](std::uint8_t fl) { return fl & kOrientationTracked; }));
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_FtmTrackerFrame);
 
 }  // namespace proprio::ftm::ftm_bench

@@ -35,6 +35,8 @@
 #include "proprio/hid/link_state.hpp"
 #include "proprio/imu_glove_board/imu_glove_device.hpp"
 #include "proprio/imu_glove_board/imu_glove_emulator.hpp"
+#include "proprio/ftm_board/ftm_device.hpp"
+#include "proprio/ftm_board/ftm_emulator.hpp"
 #include "proprio/stretch_board/stretch_device.hpp"
 #include "proprio/stretch_board/stretch_emulator.hpp"
 #include "support/devices.hpp"
@@ -148,6 +150,48 @@ struct StretchBoard : SensorBoard<StretchBoard> {
 };
 
 // ---------------------------------------------------------------------------
+// The FTM glove's read-out board, fed a hand at rest (its emulator takes any
+// ftm::FtmSampleFeed; the production one is the simulated wearer).
+
+class HandAtRestFeed final : public ftm::FtmSampleFeed {
+ public:
+  void advance(TimeNs t_ns, std::vector<ftm::FtmEvent>& out) override {
+    for (; next_imu_ns_ <= t_ns; next_imu_ns_ += 5 * kNsPerMillisecond, ++ticks_) {
+      for (std::size_t i = 0; i < ftm::kFtmImuCount; ++i) {
+        ftm::FtmEvent e;
+        e.kind = ftm::FtmEvent::Kind::imu;
+        e.index = static_cast<std::uint8_t>(i);
+        e.imu.time_ns = next_imu_ns_;
+        e.imu.accel_mps2 = Vec3(0.1 * static_cast<double>(i), 0.0, 9.8);
+        e.imu.gyro_radps = Vec3(0.0, 0.01 * static_cast<double>(ticks_ % 7), 0.0);
+        e.imu.mag_uT = Vec3(20.0, -5.0, -40.0);
+        e.imu.mag_fresh = ticks_ % 2 == 0;
+        out.push_back(e);
+      }
+    }
+  }
+
+ private:
+  TimeNs next_imu_ns_ = 0;
+  std::uint64_t ticks_ = 0;
+};
+
+struct FtmBoard : SensorBoard<FtmBoard> {
+  static constexpr const char* kName = "FtmBoard";
+  using Device = FtmBoardDevice;
+  using Stats = FtmDeviceStats;
+  using Options = FtmDeviceOptions;
+  using Command = FtmCommand;
+  using Server = FtmBoardEmulatorServer;
+  static std::unique_ptr<Server> make_server(std::shared_ptr<hid::FakeHidLink> link) {
+    auto emulator = FtmBoardEmulator::create({}, std::make_unique<HandAtRestFeed>());
+    EXPECT_TRUE(emulator.ok()) << (emulator.ok() ? "" : emulator.error().message);
+    return std::make_unique<Server>(std::move(*emulator), std::move(link));
+  }
+  static Result<Command> decode_command(std::span<const std::uint8_t> b) { return decode_ftm_command(b); }
+};
+
+// ---------------------------------------------------------------------------
 // The fingertip device (fingertip_device.hpp: "When the device is gone,
 // command() still returns at once, with not_connected, and nothing queued
 // then is sent after a reconnect").
@@ -247,7 +291,7 @@ struct DriverName {
   }
 };
 
-using Drivers = ::testing::Types<ImuGloveBoard, StretchBoard, FingertipBoard>;
+using Drivers = ::testing::Types<ImuGloveBoard, StretchBoard, FtmBoard, FingertipBoard>;
 TYPED_TEST_SUITE(HidDriverConformance, Drivers, DriverName);
 
 TYPED_TEST(HidDriverConformance, ConnectsAndStreams) {

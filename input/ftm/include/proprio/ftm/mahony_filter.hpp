@@ -62,8 +62,8 @@ struct MahonyOptions {
   Vec3 gravity_ref_in_world_mps2 = Vec3(0.0, 9.80665, 0.0);
   // The local Earth field in the world, from the compass calibration. The
   // default is a typical mid-latitude European field (48 µT, 60° dip,
-  // horizontal part along -Z); a worn glove sets it from its own calibration
-  // (the FTM's figure-eight calibration, issue 27, is not built yet).
+  // horizontal part along -Z); FtmTracker replaces it with the field its
+  // figure-eight calibration measured (FtmCalibration::earth_field_world_uT).
   Vec3 mag_ref_in_world_uT = Vec3(0.0, -41.569, -24.0);
 
   // Tilt correction gain, rad/s. 1.0 puts the accelerometer/gyro crossover at

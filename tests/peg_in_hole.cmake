@@ -6,7 +6,8 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::peg_in_hole)
     SOURCES
       peg_in_hole/test_peg_rules.cpp
       peg_in_hole/test_completion_time.cpp
-    DEPS proprio::peg_in_hole)
+      peg_in_hole/test_peg_ftm.cpp
+    DEPS proprio::peg_in_hole proprio::ftm_sim proprio::sim)
   # Whole simulated sessions: crash and resume, the settings' ordering over
   # seeds (label "study": a minute or more).
   proprio_add_test(peg_in_hole_study_tests

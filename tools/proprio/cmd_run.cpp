@@ -109,7 +109,7 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
   // Headless runs step simulated time unless told otherwise; live sources
   // (window, XR) run on the monotonic clock, as do VIST and the glove, whose
   // trackers run on their own threads in real time.
-  const bool real_time_source = kind == "vist" || kind == "glove";
+  const bool real_time_source = kind == "vist" || kind == "glove" || kind == "ftm";
   const bool simulated = o.output == OutputMode::headless && !a.realtime && !real_time_source;
   if (simulated) in.simulated_clock = std::make_shared<ManualClock>(kNsPerSecond);
   const Clock& clock = simulated ? static_cast<const Clock&>(*in.simulated_clock) : MonotonicClock::instance();
@@ -149,6 +149,21 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
       }
       sc.type = openxr_layer::SourceType::vist;
       sc.path = arg;
+    } else if (kind == "ftm") {
+      sc.type = openxr_layer::SourceType::ftm;
+      sc.input = arg.empty() ? "sim" : arg;
+      if (sc.input != "sim" && sc.input != "device") {
+        return make_error(Errc::invalid_argument, "--hands ftm '" + arg + "': choose sim (a simulated wearer, "
+                                                  "calibrated from its own figure-eight and poses) or device (an FTM "
+                                                  "board on USB, with --ftm-calibration)");
+      }
+      if (sc.input == "device" && a.ftm_calibration.empty()) {
+        return make_error(Errc::invalid_argument, "--hands ftm device needs the wearer's calibration: "
+                                                  "--ftm-calibration FILE (from 'proprio calibrate ftm')");
+      }
+      sc.calibration = a.ftm_calibration;
+      sc.subject = a.sim_subject;
+      sc.seed = a.seed;
     } else {
       sc.type = openxr_layer::SourceType::glove;
       sc.input = arg.empty() ? "sim" : arg;
@@ -174,7 +189,7 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
     // xr: the runtime's XR_EXT_hand_tracking (in --xr sessions); none: no hand.
   } else {
     return make_error(Errc::invalid_argument, "--hands '" + kind +
-                                                  "': choose touch, sim, replay FILE, vist FILE, glove [sim|device], "
+                                                  "': choose touch, sim, replay FILE, vist FILE, glove [sim|device], ftm [sim|device], "
                                                   "xr or none");
   }
 
@@ -254,8 +269,9 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--hands", a->hands,
                   "hand source: touch (a scripted index finger pressing the scene's focus), sim (the procedural "
                   "hand), replay FILE.prec, vist FILE.prec (a VIST session through the tracker), glove [sim|device] "
-                  "(the stretch glove: a simulated wearer, or the read-out board on USB), xr (the runtime's "
-                  "XR_EXT_hand_tracking) or none. vist and glove run in real time, also headless")
+                  "(the stretch glove: a simulated wearer, or the read-out board on USB), ftm [sim|device] (the FTM glove, "
+                  "likewise), xr (the runtime's "
+                  "XR_EXT_hand_tracking) or none. vist, glove and ftm run in real time, also headless")
       ->expected(1, 2)
       ->capture_default_str();
   cmd->add_flag("--no-recentre", a->no_recentre,
@@ -263,6 +279,8 @@ void add_run_command(CLI::App& app, int& exit_code) {
                 "above the scene's focus, and the hand keeps that offset)");
   cmd->add_option("--glove-calibration", a->glove_calibration,
                   "--hands glove device: the wearer's min-max calibration (proprio calibrate glove)");
+  cmd->add_option("--ftm-calibration", a->ftm_calibration,
+                  "--hands ftm device: the FTM glove's calibration (proprio calibrate ftm)");
   cmd->add_option("--haptics", a->haptics,
                   "sim (emulated fingertip devices), hid (fingertip devices on USB, one per --fingers) or none")
       ->check(CLI::IsMember({"sim", "hid", "none"}))
@@ -304,6 +322,7 @@ void add_run_command(CLI::App& app, int& exit_code) {
                   "or a real participant's id (its number sets the counterbalancing position: P07 is the 7th)");
   cmd->add_option("--participants", a->participants, "--participant sim: how many")->capture_default_str();
   cmd->add_option("--design", a->design, "the study's config file (default: the published protocol)");
+  cmd->add_option("--tracker", a->tracker, "peg-in-hole --participant sim: ideal (the commanded hand) or ftm (a simulated FTM glove)");
   cmd->add_flag("--resume", a->resume, "continue the crashed session in --out at its next trial");
   cmd->add_flag("--force", a->force, "overwrite session data already in --out");
   cmd->add_option("--calibration", a->calibration,

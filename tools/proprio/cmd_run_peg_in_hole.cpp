@@ -60,6 +60,24 @@ int run_simulated(const RunArgs& a, const PegInHoleConfig& config, const fs::pat
               "ticks, tick p50 %.0f us, p99 %.0f us, max %.0f us (stepped in simulated time, no sleeping)\n",
               r->trials_run, r->trials_recovered, r->wall_s, r->simulated_s, static_cast<unsigned long long>(r->ticks),
               r->tick_p50_us, r->tick_p99_us, r->tick_max_us);
+  if (config.tracker == SimTracker::ftm) {
+    // Means over the trials this invocation ran (the per-trial figures are in the CSV).
+    std::printf("\nFTM glove (tracked hand = the FTM's estimate; compass: max |device field| at each IMU, fraction of "
+                "compass samples the detector flagged):\n");
+    std::printf("  setting        trials  max uT dorsum/thumb-mc/index-pp/middle-pp   flagged %% (mean)            "
+                "truly disturbed (max)  angle err  wrist err\n");
+    for (int s = 1; s <= 4; ++s) {
+      const auto& f = r->ftm_by_setting[static_cast<std::size_t>(s - 1)];
+      if (f.trials == 0) continue;
+      const double n = f.trials;
+      std::printf("  %d %-10s  %6d  %8.3f %8.3f %8.3f %8.3f   %5.2f %5.2f %5.2f %5.2f   %8.2f %%     %6.2f deg  %6.2f mm\n",
+                  s, setting_from_number(s).label().c_str(), f.trials, f.max_disturbance_uT[0], f.max_disturbance_uT[1],
+                  f.max_disturbance_uT[2], f.max_disturbance_uT[3], 100.0 * f.flagged_fraction_sum[0] / n,
+                  100.0 * f.flagged_fraction_sum[1] / n, 100.0 * f.flagged_fraction_sum[2] / n,
+                  100.0 * f.flagged_fraction_sum[3] / n, 100.0 * f.disturbed_fraction_max, f.angle_error_deg_sum / n,
+                  f.wrist_error_mm_sum / n);
+    }
+  }
   return analyse_and_print(out);
 }
 
@@ -71,6 +89,11 @@ int run_peg_in_hole_impl(const RunArgs& a) {
     config = *c;
   }
   if (a.seed_given) config.seed = a.seed;
+  if (!a.tracker.empty()) {
+    auto kind = parse_sim_tracker(a.tracker);
+    if (!kind) return report_error(kind.error().with_context("--tracker"));
+    config.tracker = *kind;
+  }
   const fs::path out = a.out_given ? fs::path(a.out) : fs::path("peg-in-hole-data");
   if (a.participant.empty()) {
     return report_error(make_error(Errc::invalid_argument,
@@ -78,6 +101,12 @@ int run_peg_in_hole_impl(const RunArgs& a) {
                                    "real participant (letters, digits, '_' and '-')"));
   }
   if (a.participant == "sim") return run_simulated(a, config, out);
+  if (config.tracker != SimTracker::ideal) {
+    // A real participant's glove is a hand source: --hands ftm [sim|device].
+    return report_error(make_error(Errc::invalid_argument,
+                                   "--tracker (or [study] tracker) is for simulated participants; a real participant "
+                                   "wearing the FTM runs with --hands ftm"));
+  }
 
   // A real participant: the engine renders, the hand source and devices are
   // the flags' (defaults for this study: thumb, index and middle on 3-DOF

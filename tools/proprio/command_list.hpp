@@ -21,6 +21,8 @@ void add_glove_command(CLI::App& app, int& exit_code);
 void add_sim_glove_command(CLI::App& app, int& exit_code);
 // `bench glove` and `calibrate glove`: the stretch glove's pipeline.
 void add_stretch_glove_commands(CLI::App& app, int& exit_code);
+// `bench ftm` and `sim-ftm`: the FTM glove's evaluation and simulated sessions.
+void add_ftm_commands(CLI::App& app, int& exit_code);
 // `stretch-board emulate|monitor|list`: the stretch glove's USB HID read-out board.
 void add_stretch_board_command(CLI::App& app, int& exit_code);
 // `haptics sim|mjcf|devices|test` and `bench haptics`.

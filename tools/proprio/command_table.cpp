@@ -35,6 +35,11 @@ constexpr CommandInfo kCommands[] = {
      "scenario 4) and, with --global-model, with the training data's min-max (scenario 3).\n"
      "Simulated accuracy is not real-world accuracy.",
      Family::trackers, false},
+    {"bench ftm",
+     "Run the FTM glove's evaluation on held-out simulated subjects, calibration included: the thesis's IMU bench\n"
+     "(Euler error), free motion and pinch-grasp (tracked-DOF and fingertip error) and magnetic disturbances\n"
+     "(detector hit/false-alarm rates, heading error gated vs plain). Simulated accuracy is not real-world accuracy.",
+     Family::trackers, false},
     {"bench haptics",
      "Time the MuJoCo step (hand + peg-in-hole, pressing) and the 1 kHz servo loop on its own thread:\n"
      "tick duration, wake-up jitter and overruns. Timings depend on the machine and its load.",
@@ -76,6 +81,11 @@ constexpr CommandInfo kCommands[] = {
      "The USB HID IMU glove (7 IMUs at 100 Hz; protocol in docs/glove-hid-protocol.md): list devices, monitor a "
      "glove or a capture file, or emulate one.",
      Family::devices, true},
+    {"sim-ftm",
+     "Simulate a subject wearing the FTM glove (figure-eight, three calibration poses, then the task) and record the\n"
+     "session (4 IMUs with raw compass, 3 bend sensors, wrist tracker, ground truth); --magnets brings objects near\n"
+     "the hand, --plot tracks it and plots the heading error with and without the disturbance gate.",
+     Family::trackers, false},
     {"sim-glove",
      "Simulate stretch-glove sessions and write a training dataset (cells.npy, angles.npy, session.npy, "
      "subject.npy, phase.npy, calib_min.npy, calib_max.npy, meta.json).\n"

@@ -35,6 +35,7 @@ struct RunArgs {
   std::string hand_look = "joints";  // joints, skinned, or a glTF hand file (skinned with it)
   int sim_subject = 3;
   std::string glove_calibration;
+  std::string ftm_calibration;  // --hands ftm device: the FTM glove's calibration (proprio calibrate ftm)
   bool no_recentre = false;       // --hands vist|glove: the source's coordinates as they are  // --hands glove device: the wearer's min-max calibration
   std::uint64_t seed = 1;
   bool seed_given = false;   // --seed on the command line (studies: replaces the design's seed)
@@ -45,6 +46,7 @@ struct RunArgs {
   bool resume = false;       // continue a crashed session in --out
   bool force = false;        // overwrite existing session data
   std::string calibration;   // an HMD calibration (proprio run hmd-calibration) applied to what is drawn
+  std::string tracker;       // peg-in-hole, --participant sim: ideal|ftm (empty: the design's, ideal by default)
 };
 
 // The engine options the flags describe (output, size, frames, camera, ...).

@@ -114,12 +114,15 @@ Status FtmWearerOptions::validate() const {
   if (subject.subject_index >= sim::kSimSubjectCount || subject.subject_index < -1) {
     return FTM_SIM_BAD("subject.subject_index", subject.subject_index, "use -1 or 0..14");
   }
-  if (!std::isfinite(task_s) || task_s <= 0.0 || task_s > 3600.0) {
-    return FTM_SIM_BAD("task_s", task_s, "use a duration in (0, 3600] s");
+  if (!std::isfinite(task_s) || task_s <= 0.0 || task_s > (driven_task ? 86400.0 : 3600.0)) {
+    return FTM_SIM_BAD("task_s", task_s, driven_task ? "use a duration in (0, 86400] s" : "use a duration in (0, 3600] s");
   }
   if (auto st = imu.validate(); !st) return st.error().with_context("FtmWearerOptions.imu");
   if (!imu.magnetometer.enabled) {
     return FTM_SIM_BAD("imu.magnetometer.enabled", 0.0, "the FTM's MPU-9250s have a compass; enable it");
+  }
+  if (magnetic.enable_device_leads && (!(magnetic.lead_separation_m > 0.0) || !magnetic.lead_offset_m.allFinite())) {
+    return FTM_SIM_BAD("magnetic.lead_separation_m", magnetic.lead_separation_m, "must be > 0 (and the offset finite)");
   }
   if (imu.sample_rate_hz < imu.magnetometer.sample_rate_hz) {
     return FTM_SIM_BAD("imu.sample_rate_hz", imu.sample_rate_hz, "must be >= the compass rate");
@@ -202,7 +205,7 @@ std::string FtmWearerOptions::describe() const {
       "(DIP %.1fdeg, thumb IP %.1fdeg) | bend %.0fHz C0=%.1fpF g=%.3f/rad n=%.4f/rad2 spread %.0f%%/%.2fpF%s "
       "noise %.3fpF%s lowpass %.0fms%s artefact %.2fpF%s nonlinearity%s | wrist %.0fHz jitter %.2fmm/%.2fdeg%s "
       "latency %.0fms%s dropouts every %.1fs for %.2fs%s | magnetic: devices %s contact current %s (%.2fA), "
-      "%zu objects %s, disturbed > %.1fdeg or %.1f%% | imu: ",
+      "%zu objects %s, disturbed > %.1fdeg or %.1f%%",
       hand == Handedness::right ? "right" : "left", static_cast<unsigned long long>(seed), subject.subject_index,
       subject.hand_length_m, subject.hand_width_m, std::string(sim::to_string(protocol)).c_str(), task_s,
       calibration.enabled ? "on" : "off", calibration.figure_eight_s, calibration.pose_transition_s,
@@ -220,7 +223,17 @@ std::string FtmWearerOptions::describe() const {
       magnetic.enable_fingertip_devices ? "on" : "off", magnetic.enable_contact_current ? "on" : "off",
       magnetic.device.full_current_A, magnetic.objects.size(), magnetic.enable_objects ? "on" : "off",
       rad_to_deg(magnetic.disturbed_angle_rad), magnetic.disturbed_magnitude_fraction * 100.0);
-  return buf + imu.describe();
+  std::string extra;
+  if (driven_task) extra += " | task driven (drive())";
+  if (subject.shape) extra += " | explicit hand shape";
+  if (magnetic.enable_device_leads) {
+    char lb[160];
+    std::snprintf(lb, sizeof lb, " | device leads: offset %.1f/%.1f/%.1f mm, separation %.2f mm",
+                  1e3 * magnetic.lead_offset_m.x(), 1e3 * magnetic.lead_offset_m.y(), 1e3 * magnetic.lead_offset_m.z(),
+                  1e3 * magnetic.lead_separation_m);
+    extra += lb;
+  }
+  return buf + extra + " | imu: " + imu.describe();
 }
 
 // ---------------------------------------------------------------------------
@@ -246,7 +259,9 @@ FtmWearerSimulator::FtmWearerSimulator(FtmWearerOptions options, HandModel model
 Result<std::unique_ptr<FtmWearerSimulator>> FtmWearerSimulator::create(FtmWearerOptions options) {
   if (auto st = options.validate(); !st) return st.error();
   Result<HandShape> shape = Error{};
-  if (options.subject.subject_index >= 0) {
+  if (options.subject.shape) {
+    shape = *options.subject.shape;
+  } else if (options.subject.subject_index >= 0) {
     auto subj = sim::sim_subject(options.subject.subject_index);
     if (!subj) return subj.error();
     shape = subj->shape();
@@ -349,6 +364,12 @@ Status FtmWearerSimulator::init() {
       auto idx = env_->add_dipole(sim::haptic_device_dipole(kDeviceTips[d], o.magnetic.device, std::move(current)));
       if (!idx) return idx.error();
       device_dipole_[d] = *idx;
+      if (o.magnetic.enable_device_leads) {
+        sim::CurrentLeadPair leads = sim::fingertip_device_leads(kDeviceTips[d], *idx);
+        leads.p_joint_offset_m = o.magnetic.lead_offset_m;
+        leads.separation_m = o.magnetic.lead_separation_m;
+        if (auto l = env_->add_lead_pair(std::move(leads)); !l) return l.error().with_context("FtmMagneticOptions");
+      }
     }
   }
 
@@ -525,6 +546,21 @@ Pose FtmWearerSimulator::compute_wrist_at(TimeNs t, HandAngles& a) const {
     w = Pose{(so3_exp(dr) * w.q).normalized(), w.p + dp};
   };
 
+  if (t >= task_begin_ns_ && options_.driven_task) {
+    Pose w = driven_at(t, a);
+    a = lim.clamp(a);
+    const double lead = ns_to_seconds(t - task_begin_ns_);
+    if (cal.enabled && lead < cal.task_transition_s) {
+      HandAngles c = held_[2];
+      Pose cw = T_world_wrist_rest_;
+      wobble_env(1.0, c, cw);
+      c = lim.clamp(c);
+      const double s = sim::minimum_jerk(lead / cal.task_transition_s);
+      for (std::size_t i = 0; i < kHandDofCount; ++i) a[i] = c[i] + s * (a[i] - c[i]);
+      w = interpolate(cw, w, s);
+    }
+    return w;
+  }
   if (t >= task_begin_ns_) {
     const TimeNs tau_ns = t - task_begin_ns_;
     const auto frame = motion_.sample(tau_ns);
@@ -625,6 +661,48 @@ void FtmWearerSimulator::set_fingertip_current(Finger f, TimeNs from_ns, double 
   const auto d = static_cast<std::size_t>(f);
   if (d >= 3 || !device_dipole_[d]) return;
   (void)env_->set_current(*device_dipole_[d], from_ns, amperes);
+}
+
+void FtmWearerSimulator::drive(TimeNs t_ns, const Pose& T_world_wrist, const HandAngles& angles) {
+  if (!options_.driven_task) return;
+  const TimeNs before = driven_until_ns();
+  if (!driven_.empty() && t_ns <= before) {
+    if (t_ns < before) return;  // time runs forward only
+    driven_.back() = {t_ns, T_world_wrist, angles};
+  } else {
+    driven_.push_back({t_ns, T_world_wrist, angles});
+  }
+  // Answers for times after the previous newest sample were a hold (or the
+  // rest pose); they change now.
+  for (auto& m : memo_) {
+    if (m.valid && (before < 0 || m.t >= before)) m.valid = false;
+  }
+  while (driven_begin_ + 1 < driven_.size() && driven_[driven_begin_ + 1].t < t_ns - 2 * kNsPerSecond) ++driven_begin_;
+  if (driven_begin_ > 4096) {
+    driven_.erase(driven_.begin(), driven_.begin() + static_cast<std::ptrdiff_t>(driven_begin_));
+    driven_begin_ = 0;
+  }
+}
+
+Pose FtmWearerSimulator::driven_at(TimeNs t, HandAngles& a) const {
+  if (driven_begin_ >= driven_.size()) {
+    a = relaxed_;
+    return T_world_wrist_rest_;
+  }
+  const auto first = driven_.begin() + static_cast<std::ptrdiff_t>(driven_begin_);
+  auto hi = std::lower_bound(first, driven_.end(), t, [](const DrivenSample& d, TimeNs x) { return d.t < x; });
+  if (hi == driven_.end()) {
+    a = driven_.back().angles;
+    return driven_.back().wrist;
+  }
+  if (hi == first || hi->t == t) {
+    a = hi->angles;
+    return hi->wrist;
+  }
+  const auto lo = hi - 1;
+  const double s = static_cast<double>(t - lo->t) / static_cast<double>(hi->t - lo->t);
+  for (std::size_t i = 0; i < kHandDofCount; ++i) a[i] = lo->angles[i] + s * (hi->angles[i] - lo->angles[i]);
+  return interpolate(lo->wrist, hi->wrist, s);
 }
 
 double FtmWearerSimulator::bend_capacitance_truth_pF(ftm::FtmBend b, TimeNs t) const {

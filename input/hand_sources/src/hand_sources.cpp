@@ -65,7 +65,7 @@ void remember_inputs(const std::vector<std::filesystem::path>& inputs) {
 }
 
 // vist: a VIST tracker fed by a recorded session; glove: the stretch glove
-// (a read-out board on USB, or a simulated wearer).
+// (a read-out board on USB, or a simulated wearer); ftm: the FTM glove.
 Result<std::unique_ptr<HandSource>> start_in_plugin(const char* family, SourceConfig sc,
                                                     DurationNs max_prediction_ns, TrackedPoseProvider* poses) {
   auto plugin = load_plugin(family);
@@ -90,6 +90,7 @@ Result<std::unique_ptr<HandSource>> start_hand_source(const SourceConfig& config
     case SourceType::replay: source = start_replay(config, max_prediction_ns); break;
     case SourceType::vist: source = start_in_plugin("vist", config, max_prediction_ns, poses); break;
     case SourceType::glove: source = start_in_plugin("stretch_glove", config, max_prediction_ns, poses); break;
+    case SourceType::ftm: source = start_in_plugin("ftm", config, max_prediction_ns, poses); break;
   }
   if (!source) return source.error().with_context(std::string(to_string(config.type)) + " source");
   return source;

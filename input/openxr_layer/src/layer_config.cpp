@@ -18,6 +18,7 @@ std::string_view to_string(SourceType t) noexcept {
     case SourceType::replay: return "replay";
     case SourceType::vist: return "vist";
     case SourceType::glove: return "glove";
+    case SourceType::ftm: return "ftm";
   }
   return "unknown";
 }
@@ -63,6 +64,11 @@ std::string SourceConfig::describe() const {
   if (type == SourceType::glove) {
     std::snprintf(buf, sizeof buf, "; input %s, subject %d, seed %llu, model %s", input.c_str(), subject,
                   static_cast<unsigned long long>(seed), model.empty() ? "(shipped)" : model.c_str());
+  } else if (type == SourceType::ftm) {
+    std::snprintf(buf, sizeof buf, "; input %s, subject %d, seed %llu, calibration %s, abduction %s", input.c_str(),
+                  subject, static_cast<unsigned long long>(seed),
+                  calibration.empty() ? "(from the wearer's calibration phases)" : calibration.c_str(),
+                  track_abduction ? "tracked" : "held at 0");
   } else if (type == SourceType::vist && input == "device") {
     std::snprintf(buf, sizeof buf, "; input device, camera %s%s%s, glove %s", camera.c_str(),
                   camera_right.empty() ? "" : " + ", camera_right.c_str(),
@@ -160,6 +166,9 @@ std::set<std::string> source_keys(SourceType type) {
     case SourceType::glove:
       k.insert({"input", "calibration", "hand_length_m", "hand_width_m", "subject", "seed", "model", "layout",
                 "truth_path", "unplug_s"});
+      break;
+    case SourceType::ftm:
+      k.insert({"input", "calibration", "subject", "seed", "truth_path", "unplug_s", "abduction"});
       break;
     case SourceType::sim: k.insert({"protocol", "subject", "seed", "rate_hz"}); break;
     case SourceType::replay: k.insert({"path", "loop"}); break;
@@ -323,6 +332,66 @@ Status parse_vist(const Config& c, SourceConfig& s) {
   return parse_unplugs(c, s);
 }
 
+// ftm: one glove on one hand; a board needs its calibration file, the
+// simulated wearer calibrates itself unless given one.
+Status parse_ftm(const Config& c, SourceConfig& s) {
+  auto input = choose<std::string>(
+      c, "input", "sim",
+      {{"sim", std::string("sim")}, {"emulated", std::string("emulated")}, {"device", std::string("device")}});
+  if (!input) return input.error();
+  s.input = *input;
+  if (c.contains("hands")) {
+    if (s.hands.size() != 1) {
+      return make_error(Errc::invalid_argument, c.where("hands") +
+                                                    ": an ftm source is one glove: give one hand (\"left\" or "
+                                                    "\"right\"), and a second [[source]] for the other glove");
+    }
+  } else {
+    s.hands = {Handedness::right};
+  }
+  if (c.contains("truth_path") && s.input == "device") {
+    return make_error(Errc::invalid_argument,
+                      c.where("truth_path") + ": 'truth_path' applies only to input = \"sim\" or \"emulated\"");
+  }
+  auto truth = c.get_string_or("truth_path", "");
+  if (!truth) return truth.error();
+  s.truth_path = *truth;
+  if (c.contains("unplug_s") && s.input != "emulated") {
+    return make_error(Errc::invalid_argument, c.where("unplug_s") + ": 'unplug_s' applies only to input = \"emulated\"");
+  }
+  if (auto st = parse_unplugs(c, s); !st) return st;
+  for (const char* key : {"subject", "seed"}) {
+    if (c.contains(key) && s.input == "device") {
+      return make_error(Errc::invalid_argument, c.where(key) + ": '" + key +
+                                                    "' applies only to a simulated wearer (input = \"sim\" or "
+                                                    "\"emulated\")");
+    }
+  }
+  if (s.input == "device") {
+    auto cal = c.get_string("calibration");
+    if (!cal) {
+      return cal.error().with_context("an FTM board needs the wearer's calibration: run 'proprio calibrate ftm' and "
+                                      "name its file in 'calibration'");
+    }
+    if (cal->empty()) return make_error(Errc::invalid_argument, c.where("calibration") + ": 'calibration' is empty");
+    s.calibration = *cal;
+  } else {
+    auto cal = c.get_string_or("calibration", "");
+    if (!cal) return cal.error();
+    s.calibration = *cal;
+  }
+  auto subject = c.get_int_or("subject", 3, 0, 14);
+  if (!subject) return subject.error();
+  s.subject = static_cast<int>(*subject);
+  auto seed = c.get_int_or("seed", 1, 0, INT64_MAX);
+  if (!seed) return seed.error();
+  s.seed = static_cast<std::uint64_t>(*seed);
+  auto abduction = c.get_bool_or("abduction", true);
+  if (!abduction) return abduction.error();
+  s.track_abduction = *abduction;
+  return {};
+}
+
 Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
   const std::string where = c.source_name() + ": [[source]] #" + std::to_string(index + 1);
   SourceConfig s;
@@ -330,13 +399,14 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
                                  {{"sim", SourceType::sim},
                                   {"replay", SourceType::replay},
                                   {"vist", SourceType::vist},
-                                  {"glove", SourceType::glove}});
+                                  {"glove", SourceType::glove},
+                                  {"ftm", SourceType::ftm}});
   if (!type) return type.error().with_context(where);
   s.type = *type;
   if (auto k = c.check_keys("source", source_keys(s.type)); !k) {
     return k.error().with_context(where + " (type \"" + std::string(to_string(s.type)) + "\")");
   }
-  const bool head_relative = s.type == SourceType::sim || s.type == SourceType::glove;
+  const bool head_relative = s.type == SourceType::sim || s.type == SourceType::glove || s.type == SourceType::ftm;
   auto space = choose<ReferenceSpace>(c, "space", head_relative ? "view" : "local",
                                       {{"view", ReferenceSpace::view}, {"local", ReferenceSpace::local},
                                        {"stage", ReferenceSpace::stage}});
@@ -406,6 +476,8 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
     if (!layout) return layout.error().with_context(where);
     s.layout = *layout;
     if (!c.contains("hands")) s.hands = {Handedness::right};
+  } else if (s.type == SourceType::ftm) {
+    if (auto st = parse_ftm(c, s); !st) return st.error().with_context(where);
   } else if (s.type == SourceType::sim) {
     auto protocol = c.get_string_or("protocol", "free-motion");
     if (!protocol) return protocol.error().with_context(where);

@@ -215,6 +215,69 @@ Vec3 MagneticEnvironment::dipole_field_world_T(std::size_t index, const Vec3& p_
 Vec3 MagneticEnvironment::disturbance_world_T(const Vec3& p_world, TimeNs t, const HandPose* hand) const {
   Vec3 b = Vec3::Zero();
   for (std::size_t i = 0; i < dipoles_.size(); ++i) b += dipole_field_world_T(i, p_world, t, hand);
+  for (std::size_t i = 0; i < leads_.size(); ++i) b += lead_field_world_T(i, p_world, t, hand);
+  return b;
+}
+
+Vec3 segment_field_T(const Vec3& a, const Vec3& b, double amperes, const Vec3& p, double min_distance_m) {
+  const Vec3 ab = b - a;
+  const double len = ab.norm();
+  if (len <= 0.0 || amperes == 0.0) return Vec3::Zero();
+  const Vec3 u = ab / len;
+  const Vec3 r1 = p - a, r2 = p - b;
+  Vec3 d_perp = r1 - r1.dot(u) * u;
+  double d = d_perp.norm();
+  if (d <= 0.0) return Vec3::Zero();  // on the line: direction undefined
+  const Vec3 d_hat = d_perp / d;
+  d = std::max(d, min_distance_m);
+  const double n1 = std::max(r1.norm(), min_distance_m), n2 = std::max(r2.norm(), min_distance_m);
+  const double geometry = r1.dot(u) / n1 - r2.dot(u) / n2;  // cos θ1 − cos θ2
+  return kMu0Over4Pi * amperes / d * geometry * u.cross(d_hat);
+}
+
+CurrentLeadPair fingertip_device_leads(HandJoint tip, std::optional<std::size_t> current_of_dipole) {
+  CurrentLeadPair l;
+  l.name = std::string(to_string(tip)) + " device leads";
+  l.path.push_back(HandJoint::wrist);
+  for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+    const FingerJoints fj = finger_joints(static_cast<Finger>(fi));
+    if (fj.joints[fj.count - 1] != tip) continue;
+    for (std::size_t k = 0; k < fj.count; ++k) l.path.push_back(fj.joints[k]);
+  }
+  l.current_of_dipole = current_of_dipole;
+  return l;
+}
+
+Result<std::size_t> MagneticEnvironment::add_lead_pair(CurrentLeadPair leads) {
+  if (leads.path.size() < 2) return make_error(Errc::invalid_argument, "lead pair '" + leads.name + "': path needs >= 2 joints");
+  if (!(leads.separation_m > 0.0) || !(leads.min_distance_m > 0.0) || !leads.p_joint_offset_m.allFinite()) {
+    return make_error(Errc::invalid_argument,
+                      "lead pair '" + leads.name + "': separation_m and min_distance_m must be > 0, the offset finite");
+  }
+  if (leads.current_of_dipole && *leads.current_of_dipole >= dipoles_.size()) {
+    return make_error(Errc::invalid_argument, "lead pair '" + leads.name + "': current_of_dipole names no dipole");
+  }
+  leads_.push_back(std::move(leads));
+  return leads_.size() - 1;
+}
+
+Vec3 MagneticEnvironment::lead_field_world_T(std::size_t index, const Vec3& p_world, TimeNs t,
+                                             const HandPose* hand) const {
+  const CurrentLeadPair& l = leads_.at(index);
+  if (hand == nullptr || !hand->active) return Vec3::Zero();
+  const double amperes =
+      l.current_of_dipole ? current_A(*l.current_of_dipole, t) : (l.current_A ? l.current_A(t) : 0.0);
+  if (amperes == 0.0) return Vec3::Zero();
+  Vec3 b = Vec3::Zero();
+  Pose j0 = hand->joint(l.path[0]);
+  for (std::size_t k = 1; k < l.path.size(); ++k) {
+    const Pose j1 = hand->joint(l.path[k]);
+    const Vec3 a = j0 * l.p_joint_offset_m, e = j1 * l.p_joint_offset_m;
+    const Vec3 a_ret = a + l.separation_m * (j0.q * Vec3::UnitX()), e_ret = e + l.separation_m * (j1.q * Vec3::UnitX());
+    b += segment_field_T(a, e, amperes, p_world, l.min_distance_m);
+    b += segment_field_T(e_ret, a_ret, amperes, p_world, l.min_distance_m);  // the return, the other way
+    j0 = j1;
+  }
   return b;
 }
 
@@ -223,7 +286,8 @@ Vec3 MagneticEnvironment::field_world_T(const Vec3& p_world, TimeNs t, const Han
 }
 
 std::string MagneticEnvironment::describe() const {
-  std::string out = "MagneticEnvironment: " + earth_.describe() + ", " + std::to_string(dipoles_.size()) + " dipoles";
+  std::string out = "MagneticEnvironment: " + earth_.describe() + ", " + std::to_string(dipoles_.size()) + " dipoles" +
+                    (leads_.empty() ? std::string() : ", " + std::to_string(leads_.size()) + " lead pairs");
   for (const auto& d : dipoles_) {
     char buf[256];
     std::snprintf(buf, sizeof buf, "\n  %s: |m| = %.3g A*m2 + %.3g A*m2/A, %s%s", d.name.c_str(),

@@ -121,7 +121,20 @@ std::string PegInHoleConfig::describe() const {
       1e3 * peg.break_filter_time_constant_s, 1e3 * hole.clearance_m, main_task.repetitions,
       main_task.familiarisation_trials, main_task.trial_timeout_s, familiarisation.spring_phase_s,
       familiarisation.ground_phase_s, devices.finger_joint_stiffness_nm_per_rad, devices.force_scale,
-      devices.solver_tolerance, devices.torsional_friction ? "on" : "off", devices.emulator_substeps);
+      devices.solver_tolerance, devices.torsional_friction ? "on" : "off", devices.emulator_substeps) +
+         (tracker == SimTracker::ftm
+              ? (ftm_device_leads ? "; tracked by the simulated FTM glove (device dipoles and leads)"
+                                  : "; tracked by the simulated FTM glove (device dipoles only)")
+              : "");
+}
+
+const char* to_string(SimTracker t) noexcept { return t == SimTracker::ftm ? "ftm" : "ideal"; }
+
+Result<SimTracker> parse_sim_tracker(std::string_view name) {
+  if (name == "ideal") return SimTracker::ideal;
+  if (name == "ftm") return SimTracker::ftm;
+  return make_error(Errc::invalid_argument,
+                    fmt::format("tracker '{}': use 'ideal' (the commanded hand) or 'ftm' (the simulated FTM glove)", name));
 }
 
 Result<PegInHoleConfig> PegInHoleConfig::load_file(const std::filesystem::path& path) {
@@ -146,9 +159,15 @@ Result<PegInHoleConfig> PegInHoleConfig::parse(const std::string& toml_text, con
   {
     PEG_TRY(t, sub("study"));
     if (t) {
-      PEG_CHECK(t->check_keys("study", {"name", "seed"}));
+      PEG_CHECK(t->check_keys("study", {"name", "seed", "tracker", "ftm_device_leads"}));
+      PEG_TRY(leads, t->get_bool_or("ftm_device_leads", out.ftm_device_leads));
+      out.ftm_device_leads = leads;
       PEG_TRY(name, t->get_string_or("name", out.name));
       out.name = name;
+      PEG_TRY(tracker, t->get_string_or("tracker", to_string(out.tracker)));
+      auto kind = parse_sim_tracker(tracker);
+      if (!kind) return kind.error().with_context(source_name + ": [study] tracker");
+      out.tracker = *kind;
       PEG_TRY(seed, t->get_int_or("seed", 1, 0, std::numeric_limits<std::int64_t>::max()));
       out.seed = static_cast<std::uint64_t>(seed);
     }

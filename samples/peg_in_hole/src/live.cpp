@@ -210,7 +210,7 @@ Result<int> run_live_session(const PegInHoleConfig& config, const LiveStudyOptio
     if (!r) return r.error();
     const study::Response resp = trial_response(
         config, trial->index, setting, layout,
-        {r->inserted, r->time_s, r->breaks, 0, r->peak, r->mean, "", "real"});
+        {r->inserted, r->time_s, r->breaks, 0, r->peak, r->mean, "", "real", std::nullopt});
     if (Status st = session->record(*trial, resp); !st) return st.error();
     ++recorded;
     say(fmt::format("  {:.1f} s{}, {} breaks; render {:.1f} ms per frame; servo {}", r->time_s,

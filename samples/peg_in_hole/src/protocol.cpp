@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "proprio/core/random.hpp"
 
 namespace proprio::peg_in_hole {
@@ -16,7 +18,13 @@ const std::vector<std::string>& trial_columns() {
   static const std::vector<std::string> columns = {
       "setting",        "setting_label",  "familiarisation", "completion_time_s", "timed_out",
       "breaks",         "drops",          "peak_force_n",    "mean_force_n",      "peg_start_x_m",
-      "peg_start_z_m",  "hole_y_m",       "hole_z_m",        "recording",         "participant_kind"};
+      "peg_start_z_m",  "hole_y_m",       "hole_z_m",        "recording",         "participant_kind",
+      // The simulated FTM glove (--tracker ftm; empty otherwise), per IMU
+      // in the order dorsum, thumb metacarpal, index proximal, middle proximal.
+      "tracker", "ftm_max_disturbance_uT_dorsum", "ftm_max_disturbance_uT_thumb_mc", "ftm_max_disturbance_uT_index_pp",
+      "ftm_max_disturbance_uT_middle_pp", "ftm_flagged_fraction_dorsum", "ftm_flagged_fraction_thumb_mc",
+      "ftm_flagged_fraction_index_pp", "ftm_flagged_fraction_middle_pp", "ftm_disturbed_fraction_max",
+      "ftm_max_device_current_a", "ftm_angle_error_deg", "ftm_wrist_error_mm"};
   return columns;
 }
 
@@ -131,6 +139,21 @@ study::Response trial_response(const PegInHoleConfig& config, int trial_index, c
   e["hole_z_m"] = fmt::format("{:.4f}", layout.p_hole_in_world.z());
   e["recording"] = m.recording;
   e["participant_kind"] = m.participant_kind;
+  static const char* imu_names[] = {"dorsum", "thumb_mc", "index_pp", "middle_pp"};
+  e["tracker"] = m.ftm ? "ftm" : (m.participant_kind == "simulated" ? "ideal" : "");
+  double disturbed = 0.0, current = 0.0;
+  if (m.ftm) {
+    for (double d : m.ftm->disturbed_fraction) disturbed = std::max(disturbed, d);
+    for (double c : m.ftm->max_current_a) current = std::max(current, c);
+  }
+  for (std::size_t i = 0; i < 4; ++i) {
+    e[fmt::format("ftm_max_disturbance_uT_{}", imu_names[i])] = m.ftm ? fmt::format("{:.4f}", m.ftm->max_disturbance_uT[i]) : "";
+    e[fmt::format("ftm_flagged_fraction_{}", imu_names[i])] = m.ftm ? fmt::format("{:.4f}", m.ftm->flagged_fraction[i]) : "";
+  }
+  e["ftm_disturbed_fraction_max"] = m.ftm ? fmt::format("{:.4f}", disturbed) : "";
+  e["ftm_max_device_current_a"] = m.ftm ? fmt::format("{:.3f}", current) : "";
+  e["ftm_angle_error_deg"] = m.ftm ? fmt::format("{:.2f}", m.ftm->mean_angle_error_deg) : "";
+  e["ftm_wrist_error_mm"] = m.ftm ? fmt::format("{:.2f}", m.ftm->mean_wrist_error_mm) : "";
   return resp;
 }
 

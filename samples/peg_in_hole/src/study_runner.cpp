@@ -87,11 +87,18 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
   // here: ServoLoop only times its own thread, and this run has none.
   std::vector<float> tick_us;
   tick_us.reserve(static_cast<std::size_t>(std::min<std::int64_t>(limit_ticks, 200000)));
+  SimulatedFtmGlove* glove = options.ftm_glove;
   for (std::int64_t tick = 0; tick < limit_ticks; ++tick) {
-    const HandCommand cmd = user.act(perceive(world));
+    const HandCommand truth = user.act(perceive(world));
+    if (glove && tick == 0) {
+      if (Status st = glove->begin_trial(truth, setting.abduction); !st) return st.error();
+    }
+    // With the FTM, the world gets the glove's estimate of the true hand.
+    const HandCommand cmd = glove ? glove->track(world.now_ns(), truth) : truth;
     world.submit_hand(cmd.T_world_wrist, cmd.angles);
     const auto t0 = std::chrono::steady_clock::now();
     const PegEvent ev = world.step();
+    if (glove) glove->set_device_currents(world.now_ns(), world.device_current_a());
     tick_us.push_back(std::chrono::duration<float, std::micro>(std::chrono::steady_clock::now() - t0).count());
     if (options.on_event && ev.kind != PegEvent::Kind::none) options.on_event(ev.kind, user.phase_name());
     if (rec && (tick % record_every == 0 || ev.kind != PegEvent::Kind::none)) {
@@ -117,6 +124,7 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
   r.peak_force_n = world.peak_force_n();
   r.mean_force_n = world.mean_force_n();
   r.timing = world.timing();
+  if (glove) r.ftm = glove->end_trial();
   if (!tick_us.empty()) {
     std::sort(tick_us.begin(), tick_us.end());
     const auto at = [&](double q) { return static_cast<double>(tick_us[static_cast<std::size_t>(q * static_cast<double>(tick_us.size() - 1))]); };
@@ -143,9 +151,20 @@ struct Shared {
   std::optional<Error> error;
 };
 
-void accumulate(Shared& sh, const TrialResult& r) {
+void accumulate(Shared& sh, const TrialResult& r, Setting setting) {
   std::lock_guard<std::mutex> lock(sh.mutex);
   SimulatedStudyReport& rep = sh.report;
+  if (r.ftm) {
+    auto& f = rep.ftm_by_setting[static_cast<std::size_t>(setting.number() - 1)];
+    ++f.trials;
+    for (std::size_t i = 0; i < kFtmCompassCount; ++i) {
+      f.max_disturbance_uT[i] = std::max(f.max_disturbance_uT[i], r.ftm->max_disturbance_uT[i]);
+      f.flagged_fraction_sum[i] += r.ftm->flagged_fraction[i];
+      f.disturbed_fraction_max = std::max(f.disturbed_fraction_max, r.ftm->disturbed_fraction[i]);
+    }
+    f.angle_error_deg_sum += r.ftm->mean_angle_error_deg;
+    f.wrist_error_mm_sum += r.ftm->mean_wrist_error_mm;
+  }
   rep.ticks += r.timing.ticks;
   rep.overruns += r.timing.overruns;
   rep.tick_p50_us = std::max(rep.tick_p50_us, r.timing.tick_p50_us);
@@ -166,6 +185,7 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
   so.device_json = json{{"fingertip_devices", "emulated (in-process, real wire encoding)"},
                         {"fingers", config.devices.fingers.size()},
                         {"participant_kind", "simulated"},
+                        {"tracker", to_string(config.tracker)},
                         {"config", config.describe()}}
                        .dump();
   auto session = study::Session::open(design, so);
@@ -184,6 +204,18 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
   if (!shape) return shape.error();
   const HandModel hand(*shape);
   SimulatedUser user(config, hand, mix_seed(pseed, 0x55534552));
+  // The glove is donned and calibrated once, before familiarisation, and
+  // worn through every phase and trial (a resumed participant replays them
+  // through it too, so its state is what an uninterrupted run's was).
+  std::unique_ptr<SimulatedFtmGlove> glove;
+  if (config.tracker == SimTracker::ftm) {
+    SimulatedFtmGloveOptions go;
+    go.seed = mix_seed(pseed, 0x46544d);
+    go.device_leads = config.ftm_device_leads;
+    auto g = SimulatedFtmGlove::create(*shape, go);
+    if (!g) return g.error();
+    glove = std::move(*g);
+  }
   const fs::path rec_dir = options.out_dir / "recordings";
   if (config.recording.enabled) fs::create_directories(rec_dir);
   if (options.familiarisation) {
@@ -195,6 +227,7 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
       SimulatedTrialOptions to;
       to.phase = phase;
       to.time_limit_s = seconds;
+      to.ftm_glove = glove.get();
       auto r = run_simulated_trial(config, layout, Setting{true, true}, user, hand, device, to);
       if (!r) return r.error();
       user.set_grasp_only(false);
@@ -212,12 +245,13 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
     const TrialLayout layout = trial_layout(config, pseed, rec.trial.index);
     SimulatedTrialOptions to;
     to.time_limit_s = config.main_task.trial_timeout_s;
+    to.ftm_glove = glove.get();
     auto r = run_simulated_trial(config, layout, setting, user, hand, device, to);
     if (!r) return r.error();
     const study::Response again = trial_response(
         config, rec.trial.index, setting, layout,
         {r->completed, r->completion_time_s, r->breaks, r->drops, r->peak_force_n, r->mean_force_n,
-         config.recording.enabled ? "recordings/" + rec_name_of(rec.trial.index) : "", "simulated"});
+         config.recording.enabled ? "recordings/" + rec_name_of(rec.trial.index) : "", "simulated", r->ftm});
     bool same = again.correct == rec.response.correct;
     for (const auto& [column, value] : again.extra) {
       const auto it = rec.response.extra.find(column);
@@ -242,6 +276,7 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
     const TrialLayout layout = trial_layout(config, pseed, trial->index);
     SimulatedTrialOptions to;
     to.time_limit_s = config.main_task.trial_timeout_s;
+    to.ftm_glove = glove.get();
     const std::string rec_name = rec_name_of(trial->index);
     if (config.recording.enabled) {
       to.recording = rec_dir / rec_name;
@@ -253,9 +288,9 @@ Status run_participant(const PegInHoleConfig& config, const SimulatedStudyOption
     const study::Response resp = trial_response(
         config, trial->index, setting, layout,
         {r->completed, r->completion_time_s, r->breaks, r->drops, r->peak_force_n, r->mean_force_n,
-         config.recording.enabled ? "recordings/" + rec_name : "", "simulated"});
+         config.recording.enabled ? "recordings/" + rec_name : "", "simulated", r->ftm});
     if (Status st = session->record(*trial, resp); !st) return st;
-    accumulate(shared, *r);
+    accumulate(shared, *r, setting);
     if (options.progress) {
       options.progress(fmt::format("{} trial {:2d}/{}: setting {} ({}), {:.1f} s{}, {} breaks", id, trial->index + 1,
                                    session->planned_trials(), setting.number(), setting.label(), r->completion_time_s,

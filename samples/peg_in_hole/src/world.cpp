@@ -33,7 +33,9 @@ haptics::ContactSimOptions contact_sim_options(const PegInHoleConfig& config) {
 
 haptics::ServoLoopOptions servo_loop_options(const PegInHoleConfig& config, Setting setting) {
   haptics::ServoLoopOptions o;
-  o.remove_finger_abduction = !setting.abduction;
+  // With the FTM the tracker removes the abduction (the thesis's way), so
+  // the servo must not remove it a second time.
+  o.remove_finger_abduction = !setting.abduction && config.tracker != SimTracker::ftm;
   o.haptics_enabled = setting.haptics;
   o.force_scale = config.devices.force_scale;
   return o;
@@ -84,7 +86,9 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
     eo.physics_substeps = static_cast<std::uint32_t>(config.devices.emulator_substeps);
     auto dev = haptics::EmulatedFingertip::create(device_model, eo);
     if (!dev) return dev.error().with_context("emulated fingertip device");
-    channels.push_back({f, device_model, std::shared_ptr<haptics::FingertipSink>(std::move(*dev))});
+    std::shared_ptr<haptics::EmulatedFingertip> shared_dev(std::move(*dev));
+    w->devices_.emplace_back(f, shared_dev);
+    channels.push_back({f, device_model, shared_dev});
   }
   haptics::ServoLoopOptions so = servo_loop_options(config, setting);
   so.realtime_priority = false;  // stepped in simulated time, no thread
@@ -96,6 +100,17 @@ Result<std::unique_ptr<PegWorld>> PegWorld::create(const PegInHoleConfig& config
   w->servo_->engage(0);
   if (auto p = w->servo_->simulation().object_pose("peg")) w->peg_pose_ = *p;
   return w;
+}
+
+std::array<double, kFingerCount> PegWorld::device_current_a() const noexcept {
+  std::array<double, kFingerCount> out{};
+  for (const auto& [finger, dev] : devices_) {
+    const auto& snap = dev->emulator().snapshot();
+    double sum = 0.0;
+    for (const auto& m : snap.motors) sum += std::abs(m.current_a);
+    out[static_cast<std::size_t>(finger)] = sum;
+  }
+  return out;
 }
 
 void PegWorld::submit_hand(const Pose& T_world_wrist, const HandAngles& angles) {

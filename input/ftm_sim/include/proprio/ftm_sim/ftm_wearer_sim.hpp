@@ -62,6 +62,9 @@ struct FtmSubjectOptions {
   int subject_index = -1;  // 0..sim::kSimSubjectCount-1; -1: use the measurements below
   double hand_length_m = 0.19;
   double hand_width_m = 0.10;
+  // When set, this exact hand (e.g. the peg-in-hole participant's, thumb
+  // pronation included) instead of the two above or a subject.
+  std::optional<HandShape> shape;
 };
 
 // The figure-eight and the three calibration poses.
@@ -168,6 +171,12 @@ struct FtmMagneticOptions {
   // Built-in contact model (pinch_grasp only): the device's motors push while
   // its fingertip holds an object, at device.full_current_A.
   bool enable_contact_current = true;
+  // The devices' supply leads along the fingers (sim::CurrentLeadPair, the
+  // device's current; ASSUMED geometry there). Off by default: the 10 mm-rule
+  // dipole alone, as wave 1 measured; the peg-in-hole glove turns it on.
+  bool enable_device_leads = false;
+  Vec3 lead_offset_m = Vec3(0.006, 0.006, 0.0);  // off each joint's origin (+X lateral, +Y dorsal)
+  double lead_separation_m = 0.001;
   bool enable_objects = true;
   std::vector<FtmMagneticObject> objects;  // none by default; see figure_4_14_objects()
   // A compass sample counts as disturbed when the dipoles turn the field at
@@ -188,6 +197,12 @@ struct FtmWearerOptions {
   FtmSubjectOptions subject;
   sim::MotionProtocol protocol = sim::MotionProtocol::free_motion;  // free_motion or pinch_grasp
   double task_s = 30.0;
+  // Driven task: the task phase is whatever drive() feeds (a closed-loop
+  // simulated participant, e.g. the peg-in-hole study's), not the motion
+  // protocol, and no synergy residuals are added (the driver's distal angles
+  // are the truth). The calibration phases run as usual first; task_s may
+  // then be up to a day (a whole simulated study session).
+  bool driven_task = false;
   sim::ImuNoiseOptions imu = default_imu();
   FtmBendOptions bend;
   FtmWristTrackerOptions wrist;
@@ -242,6 +257,20 @@ class FtmWearerSimulator final : public ftm::FtmSampleFeed {
   // the finger pressing, not the motor). Call it before advance() reaches
   // from_ns: compass samples already delivered are not redone.
   void set_fingertip_current(Finger f, TimeNs from_ns, double amperes);
+
+  // Driven task (options().driven_task): the true hand at t_ns (>= the
+  // previous call's t_ns; >= task_begin_ns()). Between calls the hand moves
+  // linearly (angles) and by interpolate() (wrist); after the last call it
+  // holds. advance(T) generates the IMU tick whose nominal time is up to half
+  // a period (2.5 ms) past T, its samples lie up to 0.45 period (2.25 ms)
+  // off nominal, and the IMU simulator differentiates the pose over ±1 ms:
+  // 5.75 ms in all. So a caller must drive at least kDrivenLeadNs ahead of
+  // the time it advance()s to, and a closed-loop driver sees the glove's
+  // samples that much later than it moves (a real glove's transport delay
+  // is of the same order).
+  static constexpr DurationNs kDrivenLeadNs = 6 * kNsPerMillisecond;
+  void drive(TimeNs t_ns, const Pose& T_world_wrist, const HandAngles& angles);
+  TimeNs driven_until_ns() const noexcept { return driven_.empty() ? -1 : driven_.back().t; }
 
   const sim::ImuSimulator& imus() const { return *imu_sim_; }
   const sim::MagneticEnvironment& magnetic_environment() const { return *env_; }
@@ -298,6 +327,17 @@ class FtmWearerSimulator final : public ftm::FtmSampleFeed {
   Pose wrist_last_;
 
   std::vector<ftm::FtmEvent> pending_;
+
+  struct DrivenSample {
+    TimeNs t = 0;
+    Pose wrist;
+    HandAngles angles{};
+  };
+  // Recent driven samples only (older than 2 s before the newest are
+  // dropped: the wrist tracker's latency is the furthest anyone looks back).
+  std::vector<DrivenSample> driven_;
+  std::size_t driven_begin_ = 0;
+  Pose driven_at(TimeNs t, HandAngles& a) const;
 
   struct MemoEntry {
     TimeNs t = 0;

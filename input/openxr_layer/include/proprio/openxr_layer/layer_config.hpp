@@ -17,7 +17,7 @@
 
 namespace proprio::openxr_layer {
 
-enum class SourceType { sim, replay, vist, glove };
+enum class SourceType { sim, replay, vist, glove, ftm };
 enum class ReferenceSpace { view, local, stage };
 // Where the wrist of a source's hands comes from (docs/openxr-layer.md, "The
 // wrist"). `source`: the source's own (VIST and sim track it; the stretch
@@ -101,6 +101,13 @@ struct SourceConfig {
   std::string layout;       // glove layout TOML; empty: the built-in thesis-like glove
   std::string calibration;  // input "device": from `proprio calibrate glove`
   double hand_length_m = 0.19, hand_width_m = 0.10;  // input "device": the wearer's hand
+  // ftm: the FTM glove (IMUs + bend sensors, issue 27), one hand. input
+  // "sim" / "emulated" as for the glove (subject, seed, truth_path, unplugs;
+  // calibrated from the wearer's own figure-eight and poses unless
+  // `calibration` names a file); "device" = an FTM board on USB with the
+  // file from `proprio calibrate ftm`. false: abduction held at 0 (the
+  // thesis's "without AA").
+  bool track_abduction = true;
 
   std::string describe() const;
 };

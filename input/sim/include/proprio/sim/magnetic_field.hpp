@@ -151,6 +151,41 @@ MagneticDipole fan_dipole(PoseFunction T_world_fan, CurrentFunction current = {}
 // 160 µT at 5 cm on axis.
 MagneticDipole earphone_case_dipole(PoseFunction T_world_case);
 
+// The supply leads of a hand-worn device (issue 27; what the 10 mm dipole
+// alone misses: Lee 2021 Fig. 4.14-D shows the fingertip devices disturbing
+// the thumb-metacarpal and index-proximal compasses, ~6 cm from the
+// devices). A pair of straight conductors per bone, supply and return, each
+// carrying the device's current the opposite way, Biot–Savart per finite
+// segment:
+//
+//   B = μ0 I / (4π d) · (cos θ1 − cos θ2) · (u × d̂)
+//
+// (d the distance to the segment's line, θ1, θ2 the angles to its ends).
+// Far from a pair (r ≫ s) the two nearly cancel and |B| ≈ μ0 I s / (2π r²):
+// 0.5 A, s = 1 mm at r = 9 mm gives 1.2 µT, some 100 times the device
+// dipole's 10 mm-rule field there. ASSUMED geometry (the thesis shows no
+// wiring): the leads run from the wrist along the back of the finger to its
+// tip, p_joint_offset_m off each joint's origin (in that joint's frame: +X
+// lateral, +Y dorsal), the return conductor separation_m further along the
+// joint's +X (a flat two-core cable lying on the glove), not twisted (a
+// twisted pair would cancel far more).
+struct CurrentLeadPair {
+  std::string name;
+  std::vector<HandJoint> path;  // >= 2 joints, wrist to tip
+  Vec3 p_joint_offset_m = Vec3(0.006, 0.006, 0.0);
+  double separation_m = 0.001;
+  // The current: that dipole's (set_current() or its function), e.g. the
+  // device the leads feed; or current_A when not set.
+  std::optional<std::size_t> current_of_dipole;
+  CurrentFunction current_A;
+  double min_distance_m = 1e-3;  // closer than this to a conductor, evaluated at this distance
+};
+// Field of a straight conductor from a to b (current along a→b) at p.
+Vec3 segment_field_T(const Vec3& a, const Vec3& b, double amperes, const Vec3& p, double min_distance_m = 1e-3);
+// The leads of the device on `tip`'s finger: wrist, metacarpal (not for the
+// thumb), proximal, (intermediate,) distal, tip.
+CurrentLeadPair fingertip_device_leads(HandJoint tip, std::optional<std::size_t> current_of_dipole);
+
 // A pose that never changes, for fixed objects.
 PoseFunction fixed_pose(const Pose& T_world_object);
 
@@ -172,13 +207,19 @@ class MagneticEnvironment {
   // current_A. Calls may come in any time order. Before the first such time
   // the dipole's current function (or 0 A) applies.
   Status set_current(std::size_t index, TimeNs from_ns, double amperes);
+  // Errc::invalid_argument: a path under 2 joints, a separation or minimum
+  // distance <= 0, or a current_of_dipole that does not exist.
+  Result<std::size_t> add_lead_pair(CurrentLeadPair leads);
+  std::size_t lead_pair_count() const noexcept { return leads_.size(); }
+  // One lead pair's field (zero without an active hand).
+  Vec3 lead_field_world_T(std::size_t index, const Vec3& p_world, TimeNs t, const HandPose* hand) const;
   double current_A(std::size_t index, TimeNs t) const;
 
   // Total field (Earth + every dipole) at p_world at time t, tesla, world
   // frame. Dipoles attached to the hand need `hand` (the simulated hand at t);
   // with hand == nullptr (or an inactive hand) they are left out.
   Vec3 field_world_T(const Vec3& p_world, TimeNs t, const HandPose* hand = nullptr) const;
-  // The dipoles' part alone.
+  // The dipoles' and lead pairs' part alone.
   Vec3 disturbance_world_T(const Vec3& p_world, TimeNs t, const HandPose* hand = nullptr) const;
   // One dipole's field; also its world pose at t (nullopt: attached, no hand).
   Vec3 dipole_field_world_T(std::size_t index, const Vec3& p_world, TimeNs t, const HandPose* hand = nullptr) const;
@@ -194,6 +235,7 @@ class MagneticEnvironment {
   EarthFieldOptions earth_;
   Vec3 earth_world_T_ = Vec3::Zero();
   std::vector<MagneticDipole> dipoles_;
+  std::vector<CurrentLeadPair> leads_;
   // Per dipole: (from_ns, amperes), sorted by time.
   std::vector<std::vector<std::pair<TimeNs, double>>> schedules_;
 

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "proprio/core/hand_joint.hpp"
@@ -167,8 +168,20 @@ struct SimUserOptions {
   double alignment_tolerance_rad = 0.03;
 };
 
+// What the simulated study's world takes as the tracked hand
+// (docs/peg-in-hole.md, "With the FTM glove"): the participant's commanded
+// hand itself (ideal), or the FTM tracker's estimate of a simulated FTM
+// wearer driven by that hand (ftm; "without AA" is then the FTM's abduction
+// removed, FtmTrackerOptions::track_abduction, not the servo's).
+enum class SimTracker : std::uint8_t { ideal, ftm };
+const char* to_string(SimTracker t) noexcept;
+Result<SimTracker> parse_sim_tracker(std::string_view name);  // "ideal" or "ftm"
+
 struct PegInHoleConfig {
   std::string name = "peg-in-hole";
+  SimTracker tracker = SimTracker::ideal;  // [study] tracker, or `--tracker`
+  // With the FTM: model the devices' supply leads too ([study] ftm_device_leads).
+  bool ftm_device_leads = true;
   std::uint64_t seed = 1;
   PegOptions peg;
   HoleOptions hole;

@@ -4,11 +4,13 @@
 // where the peg starts and the hole sits in each trial. Both are pure
 // functions of the config, the participant and the seed (proprio::Rng).
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "proprio/core/result.hpp"
 #include "proprio/haptics/scene.hpp"
 #include "proprio/peg_in_hole/config.hpp"
+#include "proprio/peg_in_hole/ftm_glove.hpp"
 #include "proprio/study/design.hpp"
 #include "proprio/study/session.hpp"
 
@@ -40,6 +42,8 @@ struct TrialMeasures {
   double peak_force_n = 0.0, mean_force_n = 0.0;
   std::string recording;    // relative path of the trial's .prec, or empty
   std::string participant_kind;  // "real" or "simulated"
+  // The simulated FTM glove's figures (--tracker ftm); empty columns without.
+  std::optional<FtmTrialFigures> ftm;
 };
 // The trial's CSV row (trial_columns()).
 study::Response trial_response(const PegInHoleConfig& config, int trial_index, const Setting& setting,

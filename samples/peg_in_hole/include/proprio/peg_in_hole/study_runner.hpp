@@ -9,12 +9,14 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "proprio/haptics/servo_loop.hpp"
 #include "proprio/peg_in_hole/config.hpp"
+#include "proprio/peg_in_hole/ftm_glove.hpp"
 #include "proprio/peg_in_hole/protocol.hpp"
 #include "proprio/peg_in_hole/simulated_user.hpp"
 #include "proprio/peg_in_hole/world.hpp"
@@ -27,6 +29,7 @@ struct TrialResult {
   int breaks = 0, drops = 0, regrasps = 0;
   double peak_force_n = 0.0, mean_force_n = 0.0;
   haptics::ServoTiming timing;
+  std::optional<FtmTrialFigures> ftm;  // with SimulatedTrialOptions::ftm_glove
 };
 
 struct SimulatedTrialOptions {
@@ -38,6 +41,9 @@ struct SimulatedTrialOptions {
   // Called at each break, respawn, drop and insertion with the user's phase
   // then ("lift", "align", ...): where a policy fails (peg_probe WHY=1).
   std::function<void(PegEvent::Kind, std::string_view user_phase)> on_event;
+  // The participant wears this simulated FTM glove (config.tracker == ftm):
+  // the world gets its tracked hand, its compasses feel the devices.
+  SimulatedFtmGlove* ftm_glove = nullptr;
 };
 
 // What a participant in `w` sees (the peg, its colour, the rendered hand,
@@ -75,6 +81,16 @@ struct SimulatedStudyReport {
   std::uint64_t ticks = 0, overruns = 0;
   double tick_p50_us = 0, tick_p99_us = 0, tick_max_us = 0;
   std::vector<std::filesystem::path> csv_files;
+  // --tracker ftm: per setting (index number()-1) over the trials run, the
+  // compass figures' means and maxima (docs/peg-in-hole.md).
+  struct FtmSettingSummary {
+    int trials = 0;
+    std::array<double, kFtmCompassCount> max_disturbance_uT{};  // max over trials
+    std::array<double, kFtmCompassCount> flagged_fraction_sum{};
+    double disturbed_fraction_max = 0.0;
+    double angle_error_deg_sum = 0.0, wrist_error_mm_sum = 0.0;
+  };
+  std::array<FtmSettingSummary, 4> ftm_by_setting{};
 };
 
 Result<SimulatedStudyReport> run_simulated_study(const PegInHoleConfig& config, const SimulatedStudyOptions& options);

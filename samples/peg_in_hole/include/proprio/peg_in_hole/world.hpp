@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "proprio/core/hand_model.hpp"
+#include "proprio/haptics/emulated_fingertip.hpp"
 #include "proprio/haptics/servo_loop.hpp"
 #include "proprio/peg_in_hole/config.hpp"
 #include "proprio/peg_in_hole/monitor.hpp"
@@ -68,6 +69,10 @@ class PegWorld {
   double mean_force_n() const noexcept { return contact_ticks_ ? force_sum_ / static_cast<double>(contact_ticks_) : 0.0; }
   haptics::ServoTiming timing() const { return servo_->timing(); }
   haptics::ServoLoop& servo() noexcept { return *servo_; }
+  // Each finger's emulated device: the sum of its motors' |current| (A) as
+  // the drives' current sense reads it after the latest tick; 0 for fingers
+  // without a device. What the FTM's compasses feel (docs/peg-in-hole.md).
+  std::array<double, kFingerCount> device_current_a() const noexcept;
   const HandModel& hand_model() const noexcept { return servo_->simulation().hand_model(); }
 
  private:
@@ -80,6 +85,7 @@ class PegWorld {
   WorldPhase phase_;
   HoleGeometry hole_;
   std::unique_ptr<haptics::ServoLoop> servo_;
+  std::vector<std::pair<Finger, std::shared_ptr<haptics::EmulatedFingertip>>> devices_;
   haptics::ServoSnapshot snapshot_;
   BreakMonitor monitor_;
   TimeNs now_ns_ = 0, start_ns_ = 0, broken_at_ns_ = 0, idle_since_ns_ = -1;

@@ -5,53 +5,26 @@
 #include <cstdio>
 #include <limits>
 
+#include "proprio/hid/report_codec.hpp"
+
 namespace proprio::devices {
 
 namespace {
 
-std::uint16_t get_u16(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint16_t>(b[at] | b[at + 1] << 8);
-}
-std::uint32_t get_u32(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint32_t>(b[at]) | static_cast<std::uint32_t>(b[at + 1]) << 8 |
-         static_cast<std::uint32_t>(b[at + 2]) << 16 | static_cast<std::uint32_t>(b[at + 3]) << 24;
-}
-std::int32_t get_i32(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::int32_t>(get_u32(b, at));
-}
-std::int64_t get_i64(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  const std::uint64_t v = static_cast<std::uint64_t>(get_u32(b, at)) | static_cast<std::uint64_t>(get_u32(b, at + 4)) << 32;
-  return static_cast<std::int64_t>(v);
-}
-void put_u16(std::uint8_t* p, std::uint16_t v) noexcept {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-}
-void put_u32(std::uint8_t* p, std::uint32_t v) noexcept {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-void put_u64(std::uint8_t* p, std::uint64_t v) noexcept {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
+using hid::get_i32;
+using hid::get_i64;
+using hid::get_u16;
+using hid::get_u32;
+using hid::put_u16;
+using hid::put_u32;
+using hid::put_u64;
 
 // ID, length, version and CRC: the checks every report shares.
 FingertipDecodeStatus check_frame(std::span<const std::uint8_t> bytes, FingertipReportId id) noexcept {
-  constexpr std::size_t crc_at = kFingertipReportSize - 2;
-  if (bytes.empty()) return {FingertipDecodeErrc::empty, static_cast<std::int64_t>(kFingertipReportSize), 0};
-  if (bytes[0] != static_cast<std::uint8_t>(id)) {
-    return {FingertipDecodeErrc::unknown_report_id, static_cast<std::uint8_t>(id), bytes[0]};
-  }
-  if (bytes.size() != kFingertipReportSize) {
-    return {FingertipDecodeErrc::bad_length, static_cast<std::int64_t>(kFingertipReportSize),
-            static_cast<std::int64_t>(bytes.size())};
-  }
-  if ((bytes[1] >> 4) != kFingertipProtocolMajor) {
-    return {FingertipDecodeErrc::unsupported_version, kFingertipProtocolMajor, bytes[1]};
-  }
-  const std::uint16_t carried = get_u16(bytes, crc_at);
-  const std::uint16_t computed = hid::crc16_ccitt(bytes.first(crc_at));
-  if (carried != computed) return {FingertipDecodeErrc::crc_mismatch, carried, computed};
-  return {};
+  // The version byte is byte 1 and the CRC the last two bytes of every report.
+  return hid::to_decode_status<FingertipDecodeStatus>(
+      hid::check_frame(bytes, static_cast<std::uint8_t>(id), kFingertipReportSize, 1, kFingertipReportSize - 2,
+                       kFingertipProtocolMajor));
 }
 
 const char* report_name(FingertipReportId id) noexcept {
@@ -80,12 +53,6 @@ const char* guess_report(std::int64_t id) noexcept {
 }
 
 bool printable(std::uint8_t c) noexcept { return c >= 0x20 && c <= 0x7E; }
-
-template <typename T>
-Result<T> with_message(FingertipDecodeStatus status, const T& value, FingertipReportId id) {
-  if (!status) return to_error(status).with_context(report_name(id));
-  return value;
-}
 
 // Counts one decode outcome into a receiving end's counters.
 void count_decode(FingertipLinkCounters& c, const FingertipDecodeStatus& s) noexcept {
@@ -367,7 +334,7 @@ std::array<std::uint8_t, kFingertipReportSize> encode_fingertip_command(const Fi
   const std::size_t n = c.count < kFingertipMaxMotors ? c.count : kFingertipMaxMotors;
   for (std::size_t i = 0; i < n; ++i) put_u32(&b[L::values + 4 * i], static_cast<std::uint32_t>(c.values[i]));
   put_u64(&b[L::host_time_ns], static_cast<std::uint64_t>(c.host_time_ns));
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -417,7 +384,7 @@ std::array<std::uint8_t, kFingertipReportSize> encode_fingertip_feedback(const F
   put_u16(&b[L::rejected_commands], f.rejected_commands);
   put_u64(&b[L::applied_host_time_ns], static_cast<std::uint64_t>(f.applied_host_time_ns));
   put_u16(&b[L::ramp_permille], f.ramp_permille);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -482,7 +449,7 @@ std::array<std::uint8_t, kFingertipReportSize> encode_fingertip_info(const Finge
   put_u16(&b[L::max_current_ma], info.max_current_ma);
   const std::string_view serial = info.serial_view();
   for (std::size_t i = 0; i < serial.size(); ++i) b[L::serial + i] = static_cast<std::uint8_t>(serial[i]);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -550,15 +517,15 @@ FingertipDecodeStatus decode_fingertip_info(std::span<const std::uint8_t> b, Fin
 
 Result<FingertipCommand> decode_fingertip_command(std::span<const std::uint8_t> bytes) {
   FingertipCommand c;
-  return with_message(decode_fingertip_command(bytes, c), c, FingertipReportId::command);
+  return hid::decode_result(decode_fingertip_command(bytes, c), c, report_name(FingertipReportId::command));
 }
 Result<FingertipFeedback> decode_fingertip_feedback(std::span<const std::uint8_t> bytes) {
   FingertipFeedback f;
-  return with_message(decode_fingertip_feedback(bytes, f), f, FingertipReportId::feedback);
+  return hid::decode_result(decode_fingertip_feedback(bytes, f), f, report_name(FingertipReportId::feedback));
 }
 Result<FingertipDeviceInfo> decode_fingertip_info(std::span<const std::uint8_t> bytes) {
   FingertipDeviceInfo info;
-  return with_message(decode_fingertip_info(bytes, info), info, FingertipReportId::device_info);
+  return hid::decode_result(decode_fingertip_info(bytes, info), info, report_name(FingertipReportId::device_info));
 }
 
 // ---------------------------------------------------------------------------

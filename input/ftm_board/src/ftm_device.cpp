@@ -19,15 +19,6 @@ hid::HidDeviceSelector ftm_board_selector() {
 
 namespace {
 
-hid::LinkThreadOptions link_options(const FtmDeviceOptions& o) {
-  hid::LinkThreadOptions l;
-  l.read_timeout_ns = o.read_timeout_ns;
-  l.reconnect_backoff_min_ns = o.reconnect_backoff_min_ns;
-  l.reconnect_backoff_max_ns = o.reconnect_backoff_max_ns;
-  l.max_burst = kFtmMaxBurst;
-  return l;
-}
-
 const char* accel_name(FtmAccelRange r) noexcept {
   switch (r) {
     case FtmAccelRange::g2: return "±2 g";
@@ -79,7 +70,7 @@ FtmBoardDevice::FtmBoardDevice(std::unique_ptr<hid::HidTransport> transport, Ftm
       clock_(clock),
       clock_sync_(options_.clock),
       outlet_(options_.queue_capacity),
-      link_(std::move(transport), link_options(options_), clock, *this, stats_) {
+      link_(std::move(transport), hid::link_options_of(options_, kFtmMaxBurst), clock, *this, stats_) {
   pending_.reserve(kFtmMaxBurst * kFtmMaxSamplesPerReport);
 }
 
@@ -95,28 +86,13 @@ Status FtmBoardDevice::start() {
   return {};
 }
 
-FtmDeviceStats FtmBoardDevice::stats() {
-  if (const FtmDeviceStats* newest = published_.read()) consumer_stats_ = *newest;
-  return consumer_stats_;
-}
-
-void FtmBoardDevice::publish() {
-  stats_.record_clock(clock_sync_);
-  published_.publish(stats_);
-}
-
 bool FtmBoardDevice::before_read() {
-  for (const FtmCommand& c : commands_.take()) {
-    if (auto s = link_.transport().write(encode_ftm_command(c)); !s) {
-      ++stats_.write_failures;
-      logger().warn("FTM board: sending command {} failed: {}", static_cast<int>(c.op), s.error().message);
-    }
-  }
+  hid::send_queued_commands(commands_, link_.transport(), stats_, encode_ftm_command, "FTM board");
   return true;
 }
 
 Result<std::string> FtmBoardDevice::on_open(hid::HidTransport& transport) {
-  last_data_ns_ = clock_.now_ns();
+  restart_.saw_data(clock_.now_ns());
   std::string detail = transport.describe();
   if (options_.query_info) {
     const auto info = hid::query_info_report<kFtmInfoReportSize>(
@@ -138,17 +114,8 @@ Result<std::string> FtmBoardDevice::on_open(hid::HidTransport& transport) {
 }
 
 void FtmBoardDevice::on_silence(TimeNs now) {
-  if (options_.restart_after_silence_ns > 0 && now - last_data_ns_ >= options_.restart_after_silence_ns) {
-    FtmCommand start;
-    start.op = FtmCommandOp::start_streaming;
-    start.token = next_token_++;
-    if (auto s = link_.transport().write(encode_ftm_command(start)); !s) {
-      ++stats_.write_failures;
-    } else {
-      ++stats_.restart_commands;
-    }
-    last_data_ns_ = now;  // give the board another silence period before asking again
-  }
+  restart_.on_silence<FtmCommand>(now, options_.restart_after_silence_ns, link_.transport(), encode_ftm_command, stats_,
+                                  stats_.restart_commands);
   publish();
 }
 
@@ -165,7 +132,7 @@ void FtmBoardDevice::on_report(std::span<const std::uint8_t> report, TimeNs rece
   const bool data = r.verdict == FtmReportVerdict::accepted || r.verdict == FtmReportVerdict::duplicate ||
                     r.verdict == FtmReportVerdict::late;
   if (data) {
-    last_data_ns_ = receive_ns;
+    restart_.saw_data(receive_ns);
     if (r.device_reset) {
       deliver_pending();  // on the old epoch's clock, before it is forgotten
       clock_sync_.reset();

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "proprio/hid/report_codec.hpp"
+
 namespace proprio::devices {
 
 namespace {
@@ -34,23 +36,11 @@ constexpr std::size_t crc = 14;
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::uint16_t get_u16(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint16_t>(b[at] | b[at + 1] << 8);
-}
-std::int16_t get_i16(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::int16_t>(get_u16(b, at));
-}
-std::uint32_t get_u32(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint32_t>(b[at]) | static_cast<std::uint32_t>(b[at + 1]) << 8 |
-         static_cast<std::uint32_t>(b[at + 2]) << 16 | static_cast<std::uint32_t>(b[at + 3]) << 24;
-}
-void put_u16(std::uint8_t* p, std::uint16_t v) noexcept {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-}
-void put_u32(std::uint8_t* p, std::uint32_t v) noexcept {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
+using hid::get_i16;
+using hid::get_u16;
+using hid::get_u32;
+using hid::put_u16;
+using hid::put_u32;
 
 std::uint8_t pack_ranges(FtmAccelRange a, FtmGyroRange g) noexcept {
   return static_cast<std::uint8_t>((static_cast<std::uint8_t>(a) & 0x3) | (static_cast<std::uint8_t>(g) & 0x3) << 4);
@@ -60,20 +50,8 @@ FtmGyroRange gyro_of(std::uint8_t ranges) noexcept { return static_cast<FtmGyroR
 
 FtmDecodeStatus check_frame(std::span<const std::uint8_t> bytes, FtmReportId id, std::size_t size,
                             std::size_t version_at, std::size_t crc_at) noexcept {
-  if (bytes.empty()) return {FtmDecodeErrc::empty, static_cast<std::uint32_t>(size), 0};
-  if (bytes[0] != static_cast<std::uint8_t>(id)) {
-    return {FtmDecodeErrc::unknown_report_id, static_cast<std::uint32_t>(id), bytes[0]};
-  }
-  if (bytes.size() != size) {
-    return {FtmDecodeErrc::bad_length, static_cast<std::uint32_t>(size), static_cast<std::uint32_t>(bytes.size())};
-  }
-  if ((bytes[version_at] >> 4) != kFtmProtocolMajor) {
-    return {FtmDecodeErrc::unsupported_version, kFtmProtocolMajor, bytes[version_at]};
-  }
-  const std::uint16_t carried = get_u16(bytes, crc_at);
-  const std::uint16_t computed = hid::crc16_ccitt(bytes.first(crc_at));
-  if (carried != computed) return {FtmDecodeErrc::crc_mismatch, carried, computed};
-  return {};
+  return hid::to_decode_status<FtmDecodeStatus>(
+      hid::check_frame(bytes, static_cast<std::uint8_t>(id), size, version_at, crc_at, kFtmProtocolMajor));
 }
 
 const char* report_name(FtmReportId id) noexcept {
@@ -103,12 +81,6 @@ const char* guess_report(std::uint32_t id) noexcept {
     case 0x58: return " (the FTM board's command report)";
     default: return "";
   }
-}
-
-template <typename T>
-Result<T> with_message(FtmDecodeStatus status, const T& value, FtmReportId id) {
-  if (!status) return to_error(status).with_context(report_name(id));
-  return value;
 }
 
 // Rounds and clamps one axis to int16; true when it sits at a rail.
@@ -168,30 +140,12 @@ std::string describe(const FtmDecodeStatus& s) {
   switch (s.code) {
     case FtmDecodeErrc::ok: return "ok";
     case FtmDecodeErrc::empty:
-      std::snprintf(buf, sizeof buf, "empty report: 0 bytes where a %u-byte report was expected", s.expected);
-      break;
     case FtmDecodeErrc::bad_length:
-      std::snprintf(buf, sizeof buf,
-                    "bad length: %u bytes where this report type has exactly %u (a different device or HID "
-                    "report descriptor; check --vid/--pid)",
-                    s.actual, s.expected);
-      break;
     case FtmDecodeErrc::unknown_report_id:
-      std::snprintf(buf, sizeof buf, "unknown report ID 0x%02x where 0x%02x was expected%s", s.actual, s.expected,
-                    guess_report(s.actual));
-      break;
     case FtmDecodeErrc::unsupported_version:
-      std::snprintf(buf, sizeof buf,
-                    "unsupported protocol version %u.%u: this host speaks major version %u (update the host "
-                    "software or flash firmware speaking FTM board protocol %u.x)",
-                    s.actual >> 4, s.actual & 0xF, s.expected, s.expected);
-      break;
     case FtmDecodeErrc::crc_mismatch:
-      std::snprintf(buf, sizeof buf,
-                    "CRC mismatch: the report carries 0x%04x but its bytes give 0x%04x (corrupted on the way or a "
-                    "firmware bug); the report is dropped",
-                    s.expected, s.actual);
-      break;
+      return hid::describe_frame_fault({hid::frame_fault_of(s.code), s.expected, s.actual}, "FTM board protocol",
+                                       guess_report(s.actual));
     case FtmDecodeErrc::bad_count:
       std::snprintf(buf, sizeof buf, "bad sample count %u: a bend-sensor report carries 1 to %zu samples", s.actual,
                     kFtmBendSamplesPerReport);
@@ -255,7 +209,7 @@ std::array<std::uint8_t, kFtmDataReportSize> encode_ftm_imu_report(const FtmImuR
       put_u16(p + 13 + 2 * a, static_cast<std::uint16_t>(m.mag[a]));
     }
   }
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -307,7 +261,7 @@ std::array<std::uint8_t, kFtmDataReportSize> encode_ftm_bend_report(const FtmBen
       p[2] = r.samples[i][k].status;
     }
   }
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -354,7 +308,7 @@ std::array<std::uint8_t, kFtmInfoReportSize> encode_ftm_info_report(const FtmDev
   b[L::last_token] = info.last_command_token;
   b[L::last_result] = static_cast<std::uint8_t>(info.last_command_result);
   put_u32(&b[L::timestamp_us], info.timestamp_us);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -393,7 +347,7 @@ std::array<std::uint8_t, kFtmCommandReportSize> encode_ftm_command(const FtmComm
   put_u16(&b[L::imu_rate_hz], c.imu_rate_hz);
   put_u16(&b[L::bend_rate_hz], c.bend_rate_hz);
   b[L::ranges] = pack_ranges(c.accel_range, c.gyro_range);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -416,19 +370,19 @@ FtmDecodeStatus decode_ftm_command(std::span<const std::uint8_t> b, FtmCommand& 
 
 Result<FtmImuReport> decode_ftm_imu_report(std::span<const std::uint8_t> bytes) {
   FtmImuReport r;
-  return with_message(decode_ftm_imu_report(bytes, r), r, FtmReportId::imu);
+  return hid::decode_result(decode_ftm_imu_report(bytes, r), r, report_name(FtmReportId::imu));
 }
 Result<FtmBendReport> decode_ftm_bend_report(std::span<const std::uint8_t> bytes) {
   FtmBendReport r;
-  return with_message(decode_ftm_bend_report(bytes, r), r, FtmReportId::bend);
+  return hid::decode_result(decode_ftm_bend_report(bytes, r), r, report_name(FtmReportId::bend));
 }
 Result<FtmDeviceInfo> decode_ftm_info_report(std::span<const std::uint8_t> bytes) {
   FtmDeviceInfo info;
-  return with_message(decode_ftm_info_report(bytes, info), info, FtmReportId::device_info);
+  return hid::decode_result(decode_ftm_info_report(bytes, info), info, report_name(FtmReportId::device_info));
 }
 Result<FtmCommand> decode_ftm_command(std::span<const std::uint8_t> bytes) {
   FtmCommand c;
-  return with_message(decode_ftm_command(bytes, c), c, FtmReportId::command);
+  return hid::decode_result(decode_ftm_command(bytes, c), c, report_name(FtmReportId::command));
 }
 
 // ---------------------------------------------------------------------------

@@ -10,26 +10,13 @@
 
 namespace proprio::devices {
 
-namespace {
-
-hid::LinkThreadOptions link_options(const ImuGloveDeviceOptions& o) {
-  hid::LinkThreadOptions l;
-  l.read_timeout_ns = o.read_timeout_ns;
-  l.reconnect_backoff_min_ns = o.reconnect_backoff_min_ns;
-  l.reconnect_backoff_max_ns = o.reconnect_backoff_max_ns;
-  l.max_burst = 1;  // each tick is mapped and delivered as it arrives
-  return l;
-}
-
-}  // namespace
-
 ImuGloveDevice::ImuGloveDevice(std::unique_ptr<hid::HidTransport> transport, ImuGloveDeviceOptions options, const Clock& clock)
     : options_(options),
       clock_(clock),
       stream_(options_.stream),
       clock_sync_(options_.clock),
       outlet_(options_.queue_capacity),
-      link_(std::move(transport), link_options(options_), clock, *this, stats_) {}
+      link_(std::move(transport), hid::link_options_of(options_, 1), clock, *this, stats_) {}
 
 ImuGloveDevice::~ImuGloveDevice() { stop(); }
 
@@ -40,29 +27,13 @@ Status ImuGloveDevice::start() {
   return {};
 }
 
-ImuGloveDeviceStats ImuGloveDevice::stats() {
-  if (const ImuGloveDeviceStats* newest = published_.read()) consumer_stats_ = *newest;
-  return consumer_stats_;
-}
-
-void ImuGloveDevice::publish() {
-  stats_.record_clock(clock_sync_);
-  published_.publish(stats_);
-}
-
 bool ImuGloveDevice::before_read() {
-  for (const ImuGloveCommand& c : commands_.take()) {
-    const auto bytes = encode_command(c);
-    if (auto s = link_.transport().write(bytes); !s) {
-      ++stats_.write_failures;
-      logger().warn("glove: sending command {} failed: {}", static_cast<int>(c.op), s.error().message);
-    }
-  }
+  hid::send_queued_commands(commands_, link_.transport(), stats_, encode_command, "glove");
   return true;
 }
 
 Result<std::string> ImuGloveDevice::on_open(hid::HidTransport& transport) {
-  last_data_ns_ = clock_.now_ns();
+  restart_.saw_data(clock_.now_ns());
   std::string detail = transport.describe();
   if (options_.query_info) {
     const auto info = hid::query_info_report<kImuGloveInfoReportSize>(
@@ -81,17 +52,8 @@ Result<std::string> ImuGloveDevice::on_open(hid::HidTransport& transport) {
 }
 
 void ImuGloveDevice::on_silence(TimeNs now) {
-  if (options_.restart_after_silence_ns > 0 && now - last_data_ns_ >= options_.restart_after_silence_ns) {
-    ImuGloveCommand start;
-    start.op = ImuGloveCommandOp::start_streaming;
-    start.token = next_token_++;
-    if (auto s = link_.transport().write(encode_command(start)); !s) {
-      ++stats_.write_failures;
-    } else {
-      ++stats_.restart_commands;
-    }
-    last_data_ns_ = now;  // give the glove another silence period before asking again
-  }
+  restart_.on_silence<ImuGloveCommand>(now, options_.restart_after_silence_ns, link_.transport(), encode_command,
+                                       stats_, stats_.restart_commands);
   publish();
 }
 
@@ -101,21 +63,15 @@ void ImuGloveDevice::on_report(std::span<const std::uint8_t> report, TimeNs rece
   const bool data = r.verdict == ImuGloveReportVerdict::accepted || r.verdict == ImuGloveReportVerdict::duplicate ||
                     r.verdict == ImuGloveReportVerdict::late;
   if (data) {
-    last_data_ns_ = receive_ns;
+    restart_.saw_data(receive_ns);
     if (r.device_reset) clock_sync_.reset();
     // Duplicates and late reports are observations too: they arrived later
     // than their twin would have, so they sit above the envelope and cannot pull it.
     (void)stats_.observe_clock(clock_sync_, r.timestamp_us, receive_ns);
   }
   if (r.verdict == ImuGloveReportVerdict::accepted && r.sample_count > 0) {
-    TimeNs t = clock_sync_.to_host_ns(r.timestamp_us);
     const std::size_t part = samples[0].imu.sensor_id / kImuGloveImusPerReport;
-    if (part_delivered_[part] && t <= last_part_time_ns_[part]) {
-      t = last_part_time_ns_[part] + 1000;
-      ++stats_.time_clamps;
-    }
-    part_delivered_[part] = true;
-    last_part_time_ns_[part] = t;
+    const TimeNs t = part_times_[part].place(clock_sync_.to_host_ns(r.timestamp_us), stats_.time_clamps);
     for (std::size_t i = 0; i < r.sample_count; ++i) {
       ImuGloveSample& s = samples[i];
       s.time_ns = t;

@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <limits>
 
+#include "proprio/hid/report_codec.hpp"
+
 namespace proprio::devices {
 
 namespace {
@@ -39,26 +41,12 @@ constexpr std::size_t ranges = 6;
 constexpr std::size_t crc = 14;
 }  // namespace command_layout
 
-std::uint16_t get_u16(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint16_t>(b[at] | b[at + 1] << 8);
-}
-std::uint32_t get_u32(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint32_t>(b[at]) | static_cast<std::uint32_t>(b[at + 1]) << 8 |
-         static_cast<std::uint32_t>(b[at + 2]) << 16 | static_cast<std::uint32_t>(b[at + 3]) << 24;
-}
-std::int16_t get_i16(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  // Two's complement by value, not by a cast that is implementation-defined before C++20.
-  const int u = get_u16(b, at);
-  return static_cast<std::int16_t>(u >= 0x8000 ? u - 0x10000 : u);
-}
-void put_u16(std::uint8_t* p, std::uint16_t v) noexcept {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-}
-void put_u32(std::uint8_t* p, std::uint32_t v) noexcept {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-void put_i16(std::uint8_t* p, std::int16_t v) noexcept { put_u16(p, static_cast<std::uint16_t>(v)); }
+using hid::get_i16;
+using hid::get_u16;
+using hid::get_u32;
+using hid::put_i16;
+using hid::put_u16;
+using hid::put_u32;
 
 AccelRange accel_range_of(std::uint8_t ranges) noexcept { return static_cast<AccelRange>(ranges & 0x3); }
 GyroRange gyro_range_of(std::uint8_t ranges) noexcept { return static_cast<GyroRange>((ranges >> 2) & 0x3); }
@@ -66,20 +54,8 @@ GyroRange gyro_range_of(std::uint8_t ranges) noexcept { return static_cast<GyroR
 // Length, ID, version and CRC: the checks every report type shares.
 ImuGloveDecodeStatus check_frame(std::span<const std::uint8_t> bytes, ImuGloveReportId id, std::size_t size,
                               std::size_t version_at, std::size_t crc_at) noexcept {
-  if (bytes.empty()) return {ImuGloveDecodeErrc::empty, static_cast<std::uint32_t>(size), 0};
-  if (bytes[0] != static_cast<std::uint8_t>(id)) {
-    return {ImuGloveDecodeErrc::unknown_report_id, static_cast<std::uint32_t>(id), bytes[0]};
-  }
-  if (bytes.size() != size) {
-    return {ImuGloveDecodeErrc::bad_length, static_cast<std::uint32_t>(size), static_cast<std::uint32_t>(bytes.size())};
-  }
-  if ((bytes[version_at] >> 4) != kImuGloveProtocolMajor) {
-    return {ImuGloveDecodeErrc::unsupported_version, kImuGloveProtocolMajor, bytes[version_at]};
-  }
-  const std::uint16_t carried = get_u16(bytes, crc_at);
-  const std::uint16_t computed = hid::crc16_ccitt(bytes.first(crc_at));
-  if (carried != computed) return {ImuGloveDecodeErrc::crc_mismatch, carried, computed};
-  return {};
+  return hid::to_decode_status<ImuGloveDecodeStatus>(
+      hid::check_frame(bytes, static_cast<std::uint8_t>(id), size, version_at, crc_at, kImuGloveProtocolMajor));
 }
 
 const char* report_name(std::uint8_t id) noexcept {
@@ -89,12 +65,6 @@ const char* report_name(std::uint8_t id) noexcept {
     case ImuGloveReportId::command: return "command report (ID 0x10)";
   }
   return "report";
-}
-
-template <typename T>
-Result<T> with_message(ImuGloveDecodeStatus status, const T& value) {
-  if (!status) return to_error(status);
-  return value;
 }
 
 }  // namespace
@@ -150,29 +120,11 @@ std::string describe(const ImuGloveDecodeStatus& s) {
   switch (s.code) {
     case ImuGloveDecodeErrc::ok: return "ok";
     case ImuGloveDecodeErrc::empty:
-      std::snprintf(buf, sizeof buf, "empty report: 0 bytes where a %u-byte report was expected", s.expected);
-      break;
     case ImuGloveDecodeErrc::bad_length:
-      std::snprintf(buf, sizeof buf,
-                    "bad length: %u bytes where this report type has exactly %u (a different device or "
-                    "HID report descriptor; check --vid/--pid)",
-                    s.actual, s.expected);
-      break;
     case ImuGloveDecodeErrc::unknown_report_id:
-      std::snprintf(buf, sizeof buf, "unknown report ID 0x%02x where 0x%02x was expected", s.actual, s.expected);
-      break;
     case ImuGloveDecodeErrc::unsupported_version:
-      std::snprintf(buf, sizeof buf,
-                    "unsupported protocol version %u.%u: this host speaks major version %u (update the host "
-                    "software or flash firmware speaking protocol %u.x)",
-                    s.actual >> 4, s.actual & 0xF, s.expected, s.expected);
-      break;
     case ImuGloveDecodeErrc::crc_mismatch:
-      std::snprintf(buf, sizeof buf,
-                    "CRC mismatch: the report carries 0x%04x but its bytes give 0x%04x (corrupted on the way "
-                    "or a firmware bug); the report is dropped",
-                    s.expected, s.actual);
-      break;
+      return hid::describe_frame_fault({hid::frame_fault_of(s.code), s.expected, s.actual}, "protocol", "");
     case ImuGloveDecodeErrc::bad_imu_count:
       std::snprintf(buf, sizeof buf, "bad IMU count %u: a glove streams 1 to %zu IMUs", s.actual, kImuGloveMaxImus);
       break;
@@ -232,7 +184,7 @@ std::array<std::uint8_t, kImuGloveDataReportSize> encode_data_report(const ImuGl
     }
   }
   put_u16(&b[L::imu_status], status);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -283,7 +235,7 @@ std::array<std::uint8_t, kImuGloveInfoReportSize> encode_info_report(const ImuGl
   b[L::last_token] = info.last_command_token;
   b[L::last_result] = static_cast<std::uint8_t>(info.last_command_result);
   put_u32(&b[L::timestamp_us], info.timestamp_us);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -320,7 +272,7 @@ std::array<std::uint8_t, kImuGloveCommandReportSize> encode_command(const ImuGlo
   b[L::token] = c.token;
   put_u16(&b[L::rate_hz], c.rate_hz);
   b[L::ranges] = encode_ranges(c.accel_range, c.gyro_range);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -342,21 +294,18 @@ ImuGloveDecodeStatus decode_command(std::span<const std::uint8_t> b, ImuGloveCom
 
 Result<ImuGloveDataReport> decode_data_report(std::span<const std::uint8_t> bytes) {
   ImuGloveDataReport r;
-  const ImuGloveDecodeStatus s = decode_data_report(bytes, r);
-  if (!s) return to_error(s).with_context(report_name(static_cast<std::uint8_t>(ImuGloveReportId::imu_data)));
-  return r;
+  return hid::decode_result(decode_data_report(bytes, r), r,
+                            report_name(static_cast<std::uint8_t>(ImuGloveReportId::imu_data)));
 }
 Result<ImuGloveDeviceInfo> decode_info_report(std::span<const std::uint8_t> bytes) {
   ImuGloveDeviceInfo info;
-  const ImuGloveDecodeStatus s = decode_info_report(bytes, info);
-  if (!s) return to_error(s).with_context(report_name(static_cast<std::uint8_t>(ImuGloveReportId::device_info)));
-  return info;
+  return hid::decode_result(decode_info_report(bytes, info), info,
+                            report_name(static_cast<std::uint8_t>(ImuGloveReportId::device_info)));
 }
 Result<ImuGloveCommand> decode_command(std::span<const std::uint8_t> bytes) {
   ImuGloveCommand c;
-  const ImuGloveDecodeStatus s = decode_command(bytes, c);
-  if (!s) return to_error(s).with_context(report_name(static_cast<std::uint8_t>(ImuGloveReportId::command)));
-  return c;
+  return hid::decode_result(decode_command(bytes, c), c,
+                            report_name(static_cast<std::uint8_t>(ImuGloveReportId::command)));
 }
 
 ImuSample to_imu_sample(const ImuGloveImuRaw& raw, std::uint16_t sensor_id, AccelRange accel_range,

@@ -18,19 +18,6 @@ hid::HidDeviceSelector stretch_board_selector() {
   return sel;
 }
 
-namespace {
-
-hid::LinkThreadOptions link_options(const StretchDeviceOptions& o) {
-  hid::LinkThreadOptions l;
-  l.read_timeout_ns = o.read_timeout_ns;
-  l.reconnect_backoff_min_ns = o.reconnect_backoff_min_ns;
-  l.reconnect_backoff_max_ns = o.reconnect_backoff_max_ns;
-  l.max_burst = kStretchMaxBurst;
-  return l;
-}
-
-}  // namespace
-
 StretchDevice::StretchDevice(std::unique_ptr<hid::HidTransport> transport, StretchDeviceOptions options,
                              const Clock& clock)
     : options_(options),
@@ -38,7 +25,7 @@ StretchDevice::StretchDevice(std::unique_ptr<hid::HidTransport> transport, Stret
       stream_(options_.stream),
       clock_sync_(options_.clock),
       outlet_(options_.queue_capacity),
-      link_(std::move(transport), link_options(options_), clock, *this, stats_) {
+      link_(std::move(transport), hid::link_options_of(options_, kStretchMaxBurst), clock, *this, stats_) {
   pending_.reserve(kStretchMaxBurst * kStretchMeasurementsPerReport);
 }
 
@@ -53,29 +40,14 @@ Status StretchDevice::start() {
   return {};
 }
 
-StretchDeviceStats StretchDevice::stats() {
-  if (const StretchDeviceStats* newest = published_.read()) consumer_stats_ = *newest;
-  return consumer_stats_;
-}
-
-void StretchDevice::publish() {
-  stats_.record_clock(clock_sync_);
-  published_.publish(stats_);
-}
-
 bool StretchDevice::before_read() {
-  for (const StretchCommand& c : commands_.take()) {
-    if (auto s = link_.transport().write(encode_stretch_command(c)); !s) {
-      ++stats_.write_failures;
-      logger().warn("stretch board: sending command {} failed: {}", static_cast<int>(c.op), s.error().message);
-    }
-  }
+  hid::send_queued_commands(commands_, link_.transport(), stats_, encode_stretch_command, "stretch board");
   return true;
 }
 
 Result<std::string> StretchDevice::on_open(hid::HidTransport& transport) {
   layout_warned_ = false;
-  last_data_ns_ = clock_.now_ns();
+  restart_.saw_data(clock_.now_ns());
   std::string detail = transport.describe();
   if (options_.query_info) {
     const auto info = hid::query_info_report<kStretchInfoReportSize>(
@@ -102,17 +74,8 @@ Result<std::string> StretchDevice::on_open(hid::HidTransport& transport) {
 }
 
 void StretchDevice::on_silence(TimeNs now) {
-  if (options_.restart_after_silence_ns > 0 && now - last_data_ns_ >= options_.restart_after_silence_ns) {
-    StretchCommand start;
-    start.op = StretchCommandOp::start_streaming;
-    start.token = next_token_++;
-    if (auto s = link_.transport().write(encode_stretch_command(start)); !s) {
-      ++stats_.write_failures;
-    } else {
-      ++stats_.restart_commands;
-    }
-    last_data_ns_ = now;  // give the board another silence period before asking again
-  }
+  restart_.on_silence<StretchCommand>(now, options_.restart_after_silence_ns, link_.transport(), encode_stretch_command,
+                                      stats_, stats_.restart_commands);
   publish();
 }
 
@@ -137,7 +100,7 @@ void StretchDevice::on_report(std::span<const std::uint8_t> report, TimeNs recei
                    options_.stream.expected_bottom_strips);
   }
   if (data) {
-    last_data_ns_ = receive_ns;
+    restart_.saw_data(receive_ns);
     if (r.device_reset) {
       deliver_pending();  // on the old epoch's clock, before it is forgotten
       clock_sync_.reset();
@@ -157,14 +120,8 @@ void StretchDevice::deliver_pending() {
   if (pending_.empty()) return;
   for (StretchSample& s : pending_) {
     // The unwrapped device time equals the wire's counter modulo 2^32, which is what hid::ClockSync unwraps.
-    TimeNs t = clock_sync_.to_host_ns(static_cast<std::uint32_t>(s.device_time_us));
-    if (delivered_any_ && t <= last_time_ns_) {
-      t = last_time_ns_ + 1000;
-      ++stats_.time_clamps;
-    }
-    delivered_any_ = true;
-    last_time_ns_ = t;
-    s.time_ns = t;
+    s.time_ns = delivered_times_.place(clock_sync_.to_host_ns(static_cast<std::uint32_t>(s.device_time_us)),
+                                       stats_.time_clamps);
     if (s.status != StretchMeasurementStatus::ok && !options_.deliver_flagged) {
       ++stats_.samples_rejected;
       continue;

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "proprio/hid/report_codec.hpp"
+
 namespace proprio::devices {
 
 namespace {
@@ -30,41 +32,18 @@ constexpr std::size_t rate_hz = 4;  // u16
 constexpr std::size_t crc = 14;
 }  // namespace command_layout
 
-std::uint16_t get_u16(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint16_t>(b[at] | b[at + 1] << 8);
-}
-std::uint32_t get_u32(std::span<const std::uint8_t> b, std::size_t at) noexcept {
-  return static_cast<std::uint32_t>(b[at]) | static_cast<std::uint32_t>(b[at + 1]) << 8 |
-         static_cast<std::uint32_t>(b[at + 2]) << 16 | static_cast<std::uint32_t>(b[at + 3]) << 24;
-}
-void put_u16(std::uint8_t* p, std::uint16_t v) noexcept {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-}
-void put_u32(std::uint8_t* p, std::uint32_t v) noexcept {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
+using hid::get_u16;
+using hid::get_u32;
+using hid::put_u16;
+using hid::put_u32;
 
 bool strips_ok(std::uint8_t n) noexcept { return n >= 1 && n <= kStretchMaxStrips; }
 
 // Length, ID, version and CRC: the checks every report type shares.
 StretchDecodeStatus check_frame(std::span<const std::uint8_t> bytes, StretchReportId id, std::size_t size,
                                 std::size_t version_at, std::size_t crc_at) noexcept {
-  if (bytes.empty()) return {StretchDecodeErrc::empty, static_cast<std::uint32_t>(size), 0};
-  if (bytes[0] != static_cast<std::uint8_t>(id)) {
-    return {StretchDecodeErrc::unknown_report_id, static_cast<std::uint32_t>(id), bytes[0]};
-  }
-  if (bytes.size() != size) {
-    return {StretchDecodeErrc::bad_length, static_cast<std::uint32_t>(size),
-            static_cast<std::uint32_t>(bytes.size())};
-  }
-  if ((bytes[version_at] >> 4) != kStretchProtocolMajor) {
-    return {StretchDecodeErrc::unsupported_version, kStretchProtocolMajor, bytes[version_at]};
-  }
-  const std::uint16_t carried = get_u16(bytes, crc_at);
-  const std::uint16_t computed = hid::crc16_ccitt(bytes.first(crc_at));
-  if (carried != computed) return {StretchDecodeErrc::crc_mismatch, carried, computed};
-  return {};
+  return hid::to_decode_status<StretchDecodeStatus>(
+      hid::check_frame(bytes, static_cast<std::uint8_t>(id), size, version_at, crc_at, kStretchProtocolMajor));
 }
 
 const char* report_name(StretchReportId id) noexcept {
@@ -105,12 +84,6 @@ StretchMeasurementRaw unpack_measurement(std::uint32_t v) noexcept {
   return m;
 }
 
-template <typename T>
-Result<T> with_message(StretchDecodeStatus status, const T& value, StretchReportId id) {
-  if (!status) return to_error(status).with_context(report_name(id));
-  return value;
-}
-
 }  // namespace
 
 const char* to_string(StretchMeasurementStatus status) noexcept {
@@ -146,30 +119,12 @@ std::string describe(const StretchDecodeStatus& s) {
   switch (s.code) {
     case StretchDecodeErrc::ok: return "ok";
     case StretchDecodeErrc::empty:
-      std::snprintf(buf, sizeof buf, "empty report: 0 bytes where a %u-byte report was expected", s.expected);
-      break;
     case StretchDecodeErrc::bad_length:
-      std::snprintf(buf, sizeof buf,
-                    "bad length: %u bytes where this report type has exactly %u (a different device or HID "
-                    "report descriptor; check --vid/--pid)",
-                    s.actual, s.expected);
-      break;
     case StretchDecodeErrc::unknown_report_id:
-      std::snprintf(buf, sizeof buf, "unknown report ID 0x%02x where 0x%02x was expected%s", s.actual, s.expected,
-                    guess_report(s.actual));
-      break;
     case StretchDecodeErrc::unsupported_version:
-      std::snprintf(buf, sizeof buf,
-                    "unsupported protocol version %u.%u: this host speaks major version %u (update the host "
-                    "software or flash firmware speaking stretch board protocol %u.x)",
-                    s.actual >> 4, s.actual & 0xF, s.expected, s.expected);
-      break;
     case StretchDecodeErrc::crc_mismatch:
-      std::snprintf(buf, sizeof buf,
-                    "CRC mismatch: the report carries 0x%04x but its bytes give 0x%04x (corrupted on the way or a "
-                    "firmware bug); the report is dropped",
-                    s.expected, s.actual);
-      break;
+      return hid::describe_frame_fault({hid::frame_fault_of(s.code), s.expected, s.actual}, "stretch board protocol",
+                                       guess_report(s.actual));
     case StretchDecodeErrc::bad_count:
       std::snprintf(buf, sizeof buf, "bad measurement count %u: a report carries 1 to %zu measurements", s.actual,
                     kStretchMeasurementsPerReport);
@@ -233,7 +188,7 @@ std::array<std::uint8_t, kStretchDataReportSize> encode_stretch_data_report(cons
   for (std::size_t i = 0; i < n; ++i) {
     put_u32(&b[L::measurements + i * L::measurement_size], pack_measurement(r.measurements[i]));
   }
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -283,7 +238,7 @@ std::array<std::uint8_t, kStretchInfoReportSize> encode_stretch_info_report(cons
   b[L::last_token] = info.last_command_token;
   b[L::last_result] = static_cast<std::uint8_t>(info.last_command_result);
   put_u32(&b[L::timestamp_us], info.timestamp_us);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -325,7 +280,7 @@ std::array<std::uint8_t, kStretchCommandReportSize> encode_stretch_command(const
   b[L::opcode] = static_cast<std::uint8_t>(c.op);
   b[L::token] = c.token;
   put_u16(&b[L::rate_hz], c.rate_hz);
-  put_u16(&b[L::crc], hid::crc16_ccitt(std::span(b).first(L::crc)));
+  hid::seal_crc(b, L::crc);
   return b;
 }
 
@@ -345,15 +300,15 @@ StretchDecodeStatus decode_stretch_command(std::span<const std::uint8_t> b, Stre
 
 Result<StretchDataReport> decode_stretch_data_report(std::span<const std::uint8_t> bytes) {
   StretchDataReport r;
-  return with_message(decode_stretch_data_report(bytes, r), r, StretchReportId::measurements);
+  return hid::decode_result(decode_stretch_data_report(bytes, r), r, report_name(StretchReportId::measurements));
 }
 Result<StretchDeviceInfo> decode_stretch_info_report(std::span<const std::uint8_t> bytes) {
   StretchDeviceInfo info;
-  return with_message(decode_stretch_info_report(bytes, info), info, StretchReportId::device_info);
+  return hid::decode_result(decode_stretch_info_report(bytes, info), info, report_name(StretchReportId::device_info));
 }
 Result<StretchCommand> decode_stretch_command(std::span<const std::uint8_t> bytes) {
   StretchCommand c;
-  return with_message(decode_stretch_command(bytes, c), c, StretchReportId::command);
+  return hid::decode_result(decode_stretch_command(bytes, c), c, report_name(StretchReportId::command));
 }
 
 StretchMeasurementRaw quantise_capacitance(std::uint16_t combination, double capacitance_pf,

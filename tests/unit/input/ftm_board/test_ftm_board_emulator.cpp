@@ -22,7 +22,9 @@
 #include "proprio/ftm_board/ftm_protocol.hpp"
 #include "proprio/ftm_board/ftm_stream.hpp"
 #include "proprio/hid/hid_transport.hpp"
+#include "support/board_rig.hpp"
 #include "support/devices.hpp"
+#include "support/seed_corpus.hpp"
 
 namespace proprio::devices::ftm_board_emulator_test {
 namespace {
@@ -426,54 +428,12 @@ TEST(FtmBoardEmulator, RefusesBadOptionsWithUsableMessages) {
 
 using proprio::testing_support::wait_until;
 
-FtmDeviceOptions ftme_device_options() {
-  FtmDeviceOptions o;
-  o.read_timeout_ns = 20 * kNsPerMillisecond;
-  o.reconnect_backoff_min_ns = 5 * kNsPerMillisecond;
-  o.reconnect_backoff_max_ns = 50 * kNsPerMillisecond;
-  return o;
-}
+FtmDeviceOptions ftme_device_options() { return testing_support::quick_link<FtmDeviceOptions>(); }
 
-struct FtmeRig {
+using FtmeRigBase = testing_support::BoardRig<FtmBoardEmulatorServer, FtmBoardDevice, FtmBoardSample>;
+struct FtmeRig : FtmeRigBase {
   explicit FtmeRig(FtmEmulatorOptions eo = {}, hid::FakeHidFaults faults = {})
-      : link(std::make_shared<hid::FakeHidLink>(MonotonicClock::instance(), faults)),
-        server(ftme_make(eo), link),
-        device(std::make_unique<hid::FakeHidTransport>(link), ftme_device_options()) {
-    device.set_state_callback([this](FtmLinkState s, std::string_view) {
-      std::lock_guard lock(states_mutex);
-      states.push_back(s);
-    });
-  }
-  ~FtmeRig() {
-    device.stop();
-    server.stop();
-  }
-  FtmeRig(const FtmeRig&) = delete;
-  FtmeRig& operator=(const FtmeRig&) = delete;
-
-  bool drain_until(const std::function<bool()>& pred) {
-    return wait_until([&] {
-      FtmBoardSample s;
-      while (device.pop(s)) samples.push_back(s);
-      return pred();
-    });
-  }
-  bool quiesce() {
-    server.stop();
-    link->flush();
-    return drain_until([&] { return link->pending() == 0 && device.stats().reports_read == link->stats().delivered; });
-  }
-  std::vector<FtmLinkState> state_log() {
-    std::lock_guard lock(states_mutex);
-    return states;
-  }
-
-  std::shared_ptr<hid::FakeHidLink> link;
-  FtmBoardEmulatorServer server;
-  FtmBoardDevice device;
-  std::vector<FtmBoardSample> samples;
-  std::mutex states_mutex;
-  std::vector<FtmLinkState> states;
+      : FtmeRigBase(ftme_make(eo), ftme_device_options(), faults) {}
 };
 
 // Each sample's host time against the instant the board sampled it, and its
@@ -658,20 +618,16 @@ TEST(FtmBoardDevice, ALiveBoardIsAFeedInTimeOrder) {
 // ---------------------------------------------------------------------------
 // Fuzz seed corpus (tests/fuzz/corpus/ftm_protocol)
 
-fs::path ftme_corpus_dir() { return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "ftm_protocol"; }
+fs::path ftme_corpus_dir() { return testing_support::fuzz_corpus_dir("ftm_protocol"); }
 using proprio::testing_support::read_bytes;
 using proprio::testing_support::write_bytes;
-Bytes ftme_concat(const std::vector<FtmEmulatedReport>& reports) {
-  Bytes out;
-  for (const auto& r : reports) out.insert(out.end(), r.bytes.begin(), r.bytes.end());
-  return out;
-}
+Bytes ftme_concat(const std::vector<FtmEmulatedReport>& reports) { return testing_support::concat_reports(reports); }
 
 // PROPRIO_REGEN_CORPUS=1 ctest -R FtmSeedCorpus rewrites the seeds after a
 // protocol change; commit the result.
 TEST(FtmSeedCorpus, Regenerate) {
-  const char* regen = std::getenv("PROPRIO_REGEN_CORPUS");
-  if (!regen || std::string(regen) != "1") GTEST_SKIP() << "set PROPRIO_REGEN_CORPUS=1 to rewrite the seeds";
+  if (!testing_support::regenerate_corpus_requested())
+    GTEST_SKIP() << "set PROPRIO_REGEN_CORPUS=1 to rewrite the seeds";
   const fs::path dir = ftme_corpus_dir();
   fs::create_directories(dir);
   FtmBoardEmulator plain = ftme_make();
@@ -719,32 +675,24 @@ TEST(FtmSeedCorpus, Regenerate) {
 TEST(FtmSeedCorpus, EverySeedStillDecodes) {
   const fs::path dir = ftme_corpus_dir();
   ASSERT_TRUE(fs::is_directory(dir)) << dir << " is missing; run with PROPRIO_REGEN_CORPUS=1";
-  std::size_t seeds = 0;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    const std::string name = e.path().filename().string();
-    SCOPED_TRACE(name);
-    const Bytes b = read_bytes(e.path());
-    ++seeds;
-    if (name.rfind("info_report", 0) == 0) {
-      EXPECT_TRUE(decode_ftm_info_report(b).ok());
-    } else if (name.rfind("command", 0) == 0) {
-      EXPECT_TRUE(decode_ftm_command(b).ok());
-    } else {
-      ASSERT_EQ(b.size() % kFtmDataReportSize, 0u);
-      ASSERT_GT(b.size(), 0u);
-      FtmStreamDecoder d;
-      std::array<FtmBoardSample, kFtmMaxSamplesPerReport> out;
-      for (std::size_t at = 0; at < b.size(); at += kFtmDataReportSize) {
-        d.push(std::span(b).subspan(at, kFtmDataReportSize), out);
-      }
-      if (name.find("faults") != std::string::npos) {
-        EXPECT_GT(d.stats().decode_errors, 0u);
-      } else {
-        EXPECT_EQ(d.stats().decode_errors, 0u);
-        EXPECT_GT(d.stats().accepted, 0u);
-      }
-    }
-  }
+  const std::size_t seeds = testing_support::check_seed_corpus(
+      dir, [](const Bytes& b) { return decode_ftm_info_report(b); },
+      [](const Bytes& b) { return decode_ftm_command(b); },
+      [](const Bytes& b, bool faulty) {
+        ASSERT_EQ(b.size() % kFtmDataReportSize, 0u);
+        ASSERT_GT(b.size(), 0u);
+        FtmStreamDecoder d;
+        std::array<FtmBoardSample, kFtmMaxSamplesPerReport> out;
+        for (std::size_t at = 0; at < b.size(); at += kFtmDataReportSize) {
+          d.push(std::span(b).subspan(at, kFtmDataReportSize), out);
+        }
+        if (faulty) {
+          EXPECT_GT(d.stats().decode_errors, 0u);
+        } else {
+          EXPECT_EQ(d.stats().decode_errors, 0u);
+          EXPECT_GT(d.stats().accepted, 0u);
+        }
+      });
   EXPECT_GE(seeds, 7u);
 }
 

@@ -19,6 +19,7 @@
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/subjects.hpp"
 #include "support/devices.hpp"
+#include "support/seed_corpus.hpp"
 
 namespace proprio::devices {
 namespace {
@@ -492,21 +493,17 @@ TEST(GloveEmulatorServer, TicksWithBadReadingsAreRefusedAndCounted) {
 // ---------------------------------------------------------------------------
 // Fuzz seed corpus (tests/fuzz/corpus/glove_protocol)
 
-fs::path corpus_dir() { return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "glove_protocol"; }
+fs::path corpus_dir() { return testing_support::fuzz_corpus_dir("glove_protocol"); }
 
 using proprio::testing_support::read_bytes;
 using proprio::testing_support::write_bytes;
-Bytes concat(const std::vector<ImuGloveEmulatedReport>& reports) {
-  Bytes out;
-  for (const auto& r : reports) out.insert(out.end(), r.bytes.begin(), r.bytes.end());
-  return out;
-}
+Bytes concat(const std::vector<ImuGloveEmulatedReport>& reports) { return testing_support::concat_reports(reports); }
 
 // PROPRIO_REGEN_CORPUS=1 ctest -R GloveSeedCorpus rewrites the seeds after a
 // protocol change; commit the result.
 TEST(GloveSeedCorpus, Regenerate) {
-  const char* regen = std::getenv("PROPRIO_REGEN_CORPUS");
-  if (!regen || std::string(regen) != "1") GTEST_SKIP() << "set PROPRIO_REGEN_CORPUS=1 to rewrite the seeds";
+  if (!testing_support::regenerate_corpus_requested())
+    GTEST_SKIP() << "set PROPRIO_REGEN_CORPUS=1 to rewrite the seeds";
   const fs::path dir = corpus_dir();
   fs::create_directories(dir);
   fs::remove(dir / "empty_seed");
@@ -558,30 +555,18 @@ TEST(GloveSeedCorpus, Regenerate) {
 TEST(GloveSeedCorpus, EverySeedStillDecodes) {
   const fs::path dir = corpus_dir();
   ASSERT_TRUE(fs::is_directory(dir)) << dir << " is missing; run with PROPRIO_REGEN_CORPUS=1";
-  std::size_t seeds = 0;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    const std::string name = e.path().filename().string();
-    SCOPED_TRACE(name);
-    const Bytes b = read_bytes(e.path());
-    ++seeds;
-    if (name.rfind("info_report", 0) == 0) {
-      EXPECT_TRUE(decode_info_report(b).ok());
-    } else if (name.rfind("command", 0) == 0) {
-      EXPECT_TRUE(decode_command(b).ok());
-    } else {
-      ASSERT_EQ(b.size() % kImuGloveDataReportSize, 0u);
-      const bool faulty = name.find("faults") != std::string::npos;
-      std::size_t bad = 0;
-      for (std::size_t at = 0; at < b.size(); at += kImuGloveDataReportSize) {
-        bad += !decode_data_report(std::span(b).subspan(at, kImuGloveDataReportSize)).ok();
-      }
-      if (faulty) {
-        EXPECT_GT(bad, 0u);
-      } else {
-        EXPECT_EQ(bad, 0u);
-      }
-    }
-  }
+  const std::size_t seeds = testing_support::check_seed_corpus(
+      dir, [](const Bytes& b) { return decode_info_report(b); }, [](const Bytes& b) { return decode_command(b); },
+      [](const Bytes& b, bool faulty) {
+        ASSERT_EQ(b.size() % kImuGloveDataReportSize, 0u);
+        const std::size_t bad = testing_support::count_refused(
+            b, kImuGloveDataReportSize, [](std::span<const std::uint8_t> r) { return decode_data_report(r); });
+        if (faulty) {
+          EXPECT_GT(bad, 0u);
+        } else {
+          EXPECT_EQ(bad, 0u);
+        }
+      });
   EXPECT_GE(seeds, 8u);
 }
 

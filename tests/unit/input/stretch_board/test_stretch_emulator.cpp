@@ -25,7 +25,9 @@
 #include "proprio/stretch_board/stretch_emulator.hpp"
 #include "proprio/stretch_board/stretch_protocol.hpp"
 #include "proprio/stretch_board/stretch_stream.hpp"
+#include "support/board_rig.hpp"
 #include "support/devices.hpp"
+#include "support/seed_corpus.hpp"
 
 // A namespace of this file's own: its helpers share names with the glove
 // emulator tests' (make, Decoded, FaultRun, corpus_dir, ...) in the unity build.
@@ -431,62 +433,13 @@ TEST(StretchEmulator, RefusesBadOptionsWithUsableMessages) {
 
 using proprio::testing_support::wait_until;
 
-StretchDeviceOptions test_options() {
-  StretchDeviceOptions o;
-  o.read_timeout_ns = 20 * kNsPerMillisecond;
-  o.reconnect_backoff_min_ns = 5 * kNsPerMillisecond;
-  o.reconnect_backoff_max_ns = 50 * kNsPerMillisecond;
-  return o;
-}
+StretchDeviceOptions test_options() { return testing_support::quick_link<StretchDeviceOptions>(); }
 
-struct BoardRig {
+using BoardRigBase = testing_support::BoardRig<StretchEmulatorServer, StretchDevice, StretchSample>;
+struct BoardRig : BoardRigBase {
   explicit BoardRig(StretchEmulatorOptions eo = {}, hid::FakeHidFaults faults = {},
                     StretchDeviceOptions dopts = test_options(), StretchCapacitanceProvider p = synthetic_pf)
-      : link(std::make_shared<hid::FakeHidLink>(MonotonicClock::instance(), faults)),
-        server(make(eo, std::move(p)), link),
-        device(std::make_unique<hid::FakeHidTransport>(link), dopts) {
-    device.set_state_callback([this](StretchLinkState s, std::string_view detail) {
-      std::lock_guard lock(states_mutex);
-      states.push_back(s);
-      details.emplace_back(detail);
-    });
-  }
-  // The reader thread calls back into members declared after the device: stop it first.
-  ~BoardRig() {
-    device.stop();
-    server.stop();
-  }
-  BoardRig(const BoardRig&) = delete;
-  BoardRig& operator=(const BoardRig&) = delete;
-
-  // Pops everything available into samples; true once pred holds.
-  bool drain_until(const std::function<bool()>& pred, std::chrono::seconds timeout = 20s) {
-    return wait_until(
-        [&] {
-          StretchSample s;
-          while (device.pop(s)) samples.push_back(s);
-          return pred();
-        },
-        timeout);
-  }
-  // Stops the board and waits until the host has read everything it sent.
-  bool quiesce() {
-    server.stop();
-    link->flush();
-    return drain_until([&] { return link->pending() == 0 && device.stats().reports_read == link->stats().delivered; });
-  }
-  std::vector<StretchLinkState> state_log() {
-    std::lock_guard lock(states_mutex);
-    return states;
-  }
-
-  std::shared_ptr<hid::FakeHidLink> link;
-  StretchEmulatorServer server;
-  StretchDevice device;
-  std::vector<StretchSample> samples;
-  std::mutex states_mutex;
-  std::vector<StretchLinkState> states;
-  std::vector<std::string> details;
+      : BoardRigBase(make(eo, std::move(p)), dopts, faults) {}
 };
 
 // Value and time of every sample against the provider: the time mapping must
@@ -725,22 +678,16 @@ TEST(StretchDevice, ASlowConsumerLosesMeasurementsAtTheRingNotTheReader) {
 // ---------------------------------------------------------------------------
 // Fuzz seed corpus (tests/fuzz/corpus/stretch_protocol)
 
-fs::path corpus_dir() {
-  return fs::path(PROPRIO_TESTS_DIR) / "fuzz" / "corpus" / "stretch_protocol";
-}
+fs::path corpus_dir() { return testing_support::fuzz_corpus_dir("stretch_protocol"); }
 using proprio::testing_support::read_bytes;
 using proprio::testing_support::write_bytes;
-Bytes concat(const std::vector<StretchEmulatedReport>& reports) {
-  Bytes out;
-  for (const auto& r : reports) out.insert(out.end(), r.bytes.begin(), r.bytes.end());
-  return out;
-}
+Bytes concat(const std::vector<StretchEmulatedReport>& reports) { return testing_support::concat_reports(reports); }
 
 // PROPRIO_REGEN_CORPUS=1 ctest -R StretchSeedCorpus rewrites the seeds after a
 // protocol change; commit the result.
 TEST(StretchSeedCorpus, Regenerate) {
-  const char* regen = std::getenv("PROPRIO_REGEN_CORPUS");
-  if (!regen || std::string(regen) != "1") GTEST_SKIP() << "set PROPRIO_REGEN_CORPUS=1 to rewrite the seeds";
+  if (!testing_support::regenerate_corpus_requested())
+    GTEST_SKIP() << "set PROPRIO_REGEN_CORPUS=1 to rewrite the seeds";
   const fs::path dir = corpus_dir();
   fs::create_directories(dir);
   fs::remove(dir / "placeholder");
@@ -788,30 +735,20 @@ TEST(StretchSeedCorpus, Regenerate) {
 TEST(StretchSeedCorpus, EverySeedStillDecodes) {
   const fs::path dir = corpus_dir();
   ASSERT_TRUE(fs::is_directory(dir)) << dir << " is missing; run with PROPRIO_REGEN_CORPUS=1";
-  std::size_t seeds = 0;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    const std::string name = e.path().filename().string();
-    SCOPED_TRACE(name);
-    const Bytes b = read_bytes(e.path());
-    ++seeds;
-    if (name.rfind("info_report", 0) == 0) {
-      EXPECT_TRUE(decode_stretch_info_report(b).ok());
-    } else if (name.rfind("command", 0) == 0) {
-      EXPECT_TRUE(decode_stretch_command(b).ok());
-    } else {
-      ASSERT_EQ(b.size() % kStretchDataReportSize, 0u);
-      ASSERT_GT(b.size(), 0u);
-      std::size_t bad = 0;
-      for (std::size_t at = 0; at < b.size(); at += kStretchDataReportSize) {
-        bad += !decode_stretch_data_report(std::span(b).subspan(at, kStretchDataReportSize)).ok();
-      }
-      if (name.find("faults") != std::string::npos) {
-        EXPECT_GT(bad, 0u);
-      } else {
-        EXPECT_EQ(bad, 0u);
-      }
-    }
-  }
+  const std::size_t seeds = testing_support::check_seed_corpus(
+      dir, [](const Bytes& b) { return decode_stretch_info_report(b); },
+      [](const Bytes& b) { return decode_stretch_command(b); },
+      [](const Bytes& b, bool faulty) {
+        ASSERT_EQ(b.size() % kStretchDataReportSize, 0u);
+        ASSERT_GT(b.size(), 0u);
+        const std::size_t bad = testing_support::count_refused(
+            b, kStretchDataReportSize, [](std::span<const std::uint8_t> r) { return decode_stretch_data_report(r); });
+        if (faulty) {
+          EXPECT_GT(bad, 0u);
+        } else {
+          EXPECT_EQ(bad, 0u);
+        }
+      });
   EXPECT_GE(seeds, 7u);
 }
 

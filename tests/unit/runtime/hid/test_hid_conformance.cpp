@@ -39,6 +39,7 @@
 #include "proprio/ftm_board/ftm_emulator.hpp"
 #include "proprio/stretch_board/stretch_device.hpp"
 #include "proprio/stretch_board/stretch_emulator.hpp"
+#include "support/board_rig.hpp"
 #include "support/devices.hpp"
 
 namespace proprio::devices::hid_conformance_test {
@@ -54,16 +55,7 @@ enum class CommandsWhileDisconnected {
   refused,                 // the call says not connected; nothing is sent later
 };
 
-// Driver options that notice an unplug and come back quickly, so that the
-// tests spend their time on what they check.
-template <typename Options>
-Options quick_link() {
-  Options o;
-  if constexpr (requires { o.read_timeout_ns; }) o.read_timeout_ns = 20 * kNsPerMillisecond;
-  o.reconnect_backoff_min_ns = 5 * kNsPerMillisecond;
-  o.reconnect_backoff_max_ns = 50 * kNsPerMillisecond;
-  return o;
-}
+using testing_support::quick_link;
 
 // ---------------------------------------------------------------------------
 // The IMU glove board. Its emulator runs on ticks of IMU readings, not on

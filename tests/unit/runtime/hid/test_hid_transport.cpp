@@ -20,6 +20,7 @@
 #include "proprio/imu_glove_board/imu_glove_emulator.hpp"
 #include "proprio/hid/hid_transport.hpp"
 #include "proprio/hid/spsc_ring.hpp"
+#include "support/board_rig.hpp"
 #include "support/devices.hpp"
 
 namespace proprio::devices {
@@ -301,13 +302,7 @@ struct Rig {
   Rig(const Rig&) = delete;
   Rig& operator=(const Rig&) = delete;
 
-  static ImuGloveDeviceOptions test_options() {
-    ImuGloveDeviceOptions o;
-    o.read_timeout_ns = 20 * kNsPerMillisecond;
-    o.reconnect_backoff_min_ns = 5 * kNsPerMillisecond;
-    o.reconnect_backoff_max_ns = 50 * kNsPerMillisecond;
-    return o;
-  }
+  static ImuGloveDeviceOptions test_options() { return testing_support::quick_link<ImuGloveDeviceOptions>(); }
 
   // Schedules ticks [0, ticks) of synthetic data for release in real time,
   // starting 30 ms from now, each report after 0.2-1 ms of "USB latency".

@@ -31,6 +31,7 @@
 #include "proprio/core/time.hpp"
 #include "proprio/ftm_board/ftm_protocol.hpp"
 #include "proprio/ftm_board/ftm_stream.hpp"
+#include "proprio/hid/board_link.hpp"
 #include "proprio/hid/clock_sync.hpp"
 #include "proprio/hid/command_queue.hpp"
 #include "proprio/hid/hid_transport.hpp"
@@ -100,7 +101,7 @@ class FtmBoardDevice final : hid::LinkHandler {
   // Consumer thread (one): the next sample.
   bool pop(FtmBoardSample& out) { return outlet_.pop(out); }
   // Consumer thread: the newest statistics the reader published.
-  FtmDeviceStats stats();
+  FtmDeviceStats stats() { return published_.newest(); }
   // Any thread: queue a command for the reader thread to send.
   void send_command(const FtmCommand& command) { commands_.push(command); }
 
@@ -111,7 +112,7 @@ class FtmBoardDevice final : hid::LinkHandler {
   void end_burst(bool link_lost) override;
   void on_silence(TimeNs now_ns) override;
   void on_link_lost() override { stats_.stream = stream_.stats(); }
-  void publish() override;
+  void publish() override { published_.publish(stats_, clock_sync_); }
   void deliver_pending();
 
   FtmDeviceOptions options_;
@@ -121,8 +122,7 @@ class FtmBoardDevice final : hid::LinkHandler {
   FtmStreamDecoder stream_;
   hid::ClockSync clock_sync_;
   FtmDeviceStats stats_;
-  TimeNs last_data_ns_ = 0;
-  std::uint8_t next_token_ = 1;
+  hid::SilenceRestart restart_;
   // Newest delivered time per sensor: IMUs 0-3, then bend sensors 0-2.
   std::array<TimeNs, ftm::kFtmImuCount + ftm::kFtmBendCount> last_time_ns_{};
   std::vector<FtmBoardSample> pending_;  // capacity reserved once
@@ -130,8 +130,7 @@ class FtmBoardDevice final : hid::LinkHandler {
 
   hid::SampleOutlet<FtmBoardSample> outlet_;
   hid::CommandQueue<FtmCommand> commands_;
-  Mailbox<FtmDeviceStats> published_;
-  FtmDeviceStats consumer_stats_;
+  hid::PublishedStats<FtmDeviceStats> published_;
   hid::LinkThread link_;  // last: its thread uses everything above
 };
 

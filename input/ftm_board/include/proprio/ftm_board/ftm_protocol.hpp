@@ -28,6 +28,7 @@
 #include "proprio/core/result.hpp"
 #include "proprio/ftm/ftm_glove.hpp"
 #include "proprio/hid/crc16.hpp"
+#include "proprio/hid/report_codec.hpp"
 #include "proprio/hid/usb_ids.hpp"
 
 namespace proprio::devices {
@@ -241,13 +242,7 @@ enum class FtmDecodeErrc : std::uint8_t {
 inline constexpr std::size_t kFtmDecodeErrcCount = 10;
 const char* to_string(FtmDecodeErrc code) noexcept;
 
-struct FtmDecodeStatus {
-  FtmDecodeErrc code = FtmDecodeErrc::ok;
-  std::uint32_t expected = 0;
-  std::uint32_t actual = 0;
-  bool ok() const noexcept { return code == FtmDecodeErrc::ok; }
-  explicit operator bool() const noexcept { return ok(); }
-};
+using FtmDecodeStatus = hid::DecodeStatus<FtmDecodeErrc>;
 std::string describe(const FtmDecodeStatus& status);
 Error to_error(const FtmDecodeStatus& status);  // Errc::parse_error or unsupported
 

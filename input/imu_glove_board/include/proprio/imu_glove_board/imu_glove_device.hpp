@@ -20,6 +20,7 @@
 #include "proprio/core/time.hpp"
 #include "proprio/imu_glove_board/imu_glove_protocol.hpp"
 #include "proprio/imu_glove_board/imu_glove_stream.hpp"
+#include "proprio/hid/board_link.hpp"
 #include "proprio/hid/clock_sync.hpp"
 #include "proprio/hid/command_queue.hpp"
 #include "proprio/hid/hid_transport.hpp"
@@ -94,7 +95,7 @@ class ImuGloveDevice final : hid::LinkHandler {
   // Consumer thread (one): the next sample, in arrival order.
   bool pop(ImuGloveSample& out) { return outlet_.pop(out); }
   // Consumer thread: the newest statistics the reader published.
-  ImuGloveDeviceStats stats();
+  ImuGloveDeviceStats stats() { return published_.newest(); }
 
   // Any thread: queue a command for the reader thread to send.
   void send_command(const ImuGloveCommand& command) { commands_.push(command); }
@@ -105,7 +106,7 @@ class ImuGloveDevice final : hid::LinkHandler {
   bool before_read() override;
   void on_report(std::span<const std::uint8_t> report, TimeNs receive_ns) override;
   void on_silence(TimeNs now_ns) override;
-  void publish() override;
+  void publish() override { published_.publish(stats_, clock_sync_); }
 
   ImuGloveDeviceOptions options_;
   const Clock& clock_;
@@ -114,15 +115,12 @@ class ImuGloveDevice final : hid::LinkHandler {
   ImuGloveStreamDecoder stream_;
   hid::ClockSync clock_sync_;
   ImuGloveDeviceStats stats_;
-  TimeNs last_data_ns_ = 0;
-  std::uint8_t next_token_ = 1;
-  std::array<TimeNs, kImuGloveMaxReportsPerTick> last_part_time_ns_{};  // newest delivered time per part
-  std::array<bool, kImuGloveMaxReportsPerTick> part_delivered_{};
+  hid::SilenceRestart restart_;
+  std::array<hid::StrictlyIncreasing, kImuGloveMaxReportsPerTick> part_times_{};  // delivered times per part
 
   hid::SampleOutlet<ImuGloveSample> outlet_;
   hid::CommandQueue<ImuGloveCommand> commands_;
-  Mailbox<ImuGloveDeviceStats> published_;
-  ImuGloveDeviceStats consumer_stats_;  // consumer's copy of the newest published
+  hid::PublishedStats<ImuGloveDeviceStats> published_;
   hid::LinkThread link_;             // last: its thread uses everything above
 };
 

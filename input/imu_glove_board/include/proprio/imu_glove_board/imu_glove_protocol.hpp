@@ -24,6 +24,7 @@
 #include "proprio/core/recording.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/hid/crc16.hpp"
+#include "proprio/hid/report_codec.hpp"
 #include "proprio/hid/usb_ids.hpp"
 
 namespace proprio::devices {
@@ -195,13 +196,7 @@ enum class ImuGloveDecodeErrc : std::uint8_t {
 inline constexpr std::size_t kImuGloveDecodeErrcCount = 10;
 const char* to_string(ImuGloveDecodeErrc code) noexcept;
 
-struct ImuGloveDecodeStatus {
-  ImuGloveDecodeErrc code = ImuGloveDecodeErrc::ok;
-  std::uint32_t expected = 0;
-  std::uint32_t actual = 0;
-  bool ok() const noexcept { return code == ImuGloveDecodeErrc::ok; }
-  explicit operator bool() const noexcept { return ok(); }
-};
+using ImuGloveDecodeStatus = hid::DecodeStatus<ImuGloveDecodeErrc>;
 // "CRC mismatch: the report carries 0x1a2b but its bytes 0-61 give 0x3c4d ..."
 std::string describe(const ImuGloveDecodeStatus& status);
 Error to_error(const ImuGloveDecodeStatus& status);  // Errc::parse_error or unsupported

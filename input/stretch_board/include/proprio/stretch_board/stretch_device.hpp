@@ -35,6 +35,7 @@
 #include "proprio/core/time.hpp"
 #include "proprio/stretch_board/stretch_protocol.hpp"
 #include "proprio/stretch_board/stretch_stream.hpp"
+#include "proprio/hid/board_link.hpp"
 #include "proprio/hid/clock_sync.hpp"
 #include "proprio/hid/command_queue.hpp"
 #include "proprio/hid/hid_transport.hpp"
@@ -122,7 +123,7 @@ class StretchDevice final : hid::LinkHandler {
   // Consumer thread (one): the next measurement, in arrival (and time) order.
   bool pop(StretchSample& out) { return outlet_.pop(out); }
   // Consumer thread: the newest statistics the reader published.
-  StretchDeviceStats stats();
+  StretchDeviceStats stats() { return published_.newest(); }
 
   // Any thread: queue a command for the reader thread to send.
   void send_command(const StretchCommand& command) { commands_.push(command); }
@@ -136,7 +137,7 @@ class StretchDevice final : hid::LinkHandler {
   void end_burst(bool link_lost) override;
   void on_silence(TimeNs now_ns) override;
   void on_link_lost() override { stats_.stream = stream_.stats(); }
-  void publish() override;
+  void publish() override { published_.publish(stats_, clock_sync_); }
   void deliver_pending();
 
   StretchDeviceOptions options_;
@@ -146,18 +147,15 @@ class StretchDevice final : hid::LinkHandler {
   StretchStreamDecoder stream_;
   hid::ClockSync clock_sync_;
   StretchDeviceStats stats_;
-  TimeNs last_data_ns_ = 0;
-  std::uint8_t next_token_ = 1;
-  bool delivered_any_ = false;
-  TimeNs last_time_ns_ = 0;  // newest delivered measurement time
+  hid::SilenceRestart restart_;
+  hid::StrictlyIncreasing delivered_times_;
   bool layout_warned_ = false;
   std::vector<StretchSample> pending_;  // capacity reserved once: kStretchMaxBurst reports
   std::function<void()> burst_callback_;
 
   hid::SampleOutlet<StretchSample> outlet_;
   hid::CommandQueue<StretchCommand> commands_;
-  Mailbox<StretchDeviceStats> published_;
-  StretchDeviceStats consumer_stats_;  // consumer's copy of the newest published
+  hid::PublishedStats<StretchDeviceStats> published_;
   hid::LinkThread link_;               // last: its thread uses everything above
 };
 

@@ -32,6 +32,7 @@
 
 #include "proprio/core/result.hpp"
 #include "proprio/hid/crc16.hpp"
+#include "proprio/hid/report_codec.hpp"
 #include "proprio/hid/usb_ids.hpp"
 
 namespace proprio::devices {
@@ -227,13 +228,7 @@ enum class StretchDecodeErrc : std::uint8_t {
 inline constexpr std::size_t kStretchDecodeErrcCount = 12;
 const char* to_string(StretchDecodeErrc code) noexcept;
 
-struct StretchDecodeStatus {
-  StretchDecodeErrc code = StretchDecodeErrc::ok;
-  std::uint32_t expected = 0;
-  std::uint32_t actual = 0;
-  bool ok() const noexcept { return code == StretchDecodeErrc::ok; }
-  explicit operator bool() const noexcept { return ok(); }
-};
+using StretchDecodeStatus = hid::DecodeStatus<StretchDecodeErrc>;
 // "CRC mismatch: the report carries 0x1a2b but its bytes give 0x3c4d ..."
 std::string describe(const StretchDecodeStatus& status);
 Error to_error(const StretchDecodeStatus& status);  // Errc::parse_error or unsupported

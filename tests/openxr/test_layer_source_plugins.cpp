@@ -1,6 +1,7 @@
 // The layer maps only what its configured sources need (input/hand_sources):
 // a layer serving sim or replay hands brings neither OpenCV nor hidapi into
-// the app; a glove source loads the stretch-glove plugin, and OpenCV with it.
+// the app; a glove source loads the stretch-glove plugin, and OpenCV with it;
+// an ftm source loads the FTM plugin and hidapi, and no OpenCV.
 // Each case runs layer_maps_probe, a bare OpenXR app, in a fresh process
 // through Debian's loader on the mock runtime, and reads what it mapped.
 #include <fcntl.h>
@@ -127,7 +128,7 @@ class LayerSourcePlugins : public ::testing::Test {
     EXPECT_TRUE(r.maps("libXrApiLayer_proprio_hand_tracking.so")) << "the layer was not loaded\n" << r.describe();
     EXPECT_FALSE(r.maps("libopencv_")) << r.describe();
     EXPECT_FALSE(r.maps("libhidapi")) << r.describe();
-    EXPECT_FALSE(r.maps("libproprio_source_")) << r.describe();
+    EXPECT_FALSE(r.maps("libproprio_source_")) << r.describe();  // ftm, glove and vist alike
   }
 
   TempDir dir_;
@@ -162,6 +163,28 @@ TEST_F(LayerSourcePlugins, AGloveSourceLoadsTheStretchGlovePluginAndOpenCv) {
   EXPECT_GT(right, 0) << r.describe();
   EXPECT_TRUE(r.maps("/libproprio_source_stretch_glove.so")) << r.describe();
   EXPECT_TRUE(r.maps("libopencv_dnn")) << r.describe();
+  EXPECT_FALSE(r.maps("libproprio_source_vist.so")) << r.describe();
+  EXPECT_FALSE(r.maps("libproprio_source_ftm.so")) << r.describe();
+}
+
+// The FTM glove's plugin maps only what the glove needs: hidapi for its board,
+// never OpenCV nor the other gloves' plugins (a simulated wearer too: the
+// plugin is one library).
+TEST_F(LayerSourcePlugins, AnFtmSourceLoadsOnlyTheFtmPlugin) {
+  const auto r = run("[layer]\nmax_prediction_ms = 500\n[[source]]\ntype = \"ftm\"\ninput = \"sim\"\n"
+                     "hands = [\"right\"]\nspace = \"local\"\n",
+                     "right");
+  ASSERT_EQ(r.status, 0) << r.describe();
+  int left = 0, right = 0;
+  const auto at = r.out.find("active ");
+  ASSERT_NE(at, std::string::npos) << r.describe();
+  ASSERT_EQ(std::sscanf(r.out.c_str() + at, "active %d %d", &left, &right), 2) << r.describe();
+  EXPECT_GT(right, 0) << "the ftm source served the right hand\n" << r.describe();
+  EXPECT_EQ(left, 0) << "one glove, one hand\n" << r.describe();
+  EXPECT_TRUE(r.maps("/libproprio_source_ftm.so")) << r.describe();
+  EXPECT_TRUE(r.maps("libhidapi")) << r.describe();
+  EXPECT_FALSE(r.maps("libopencv_")) << r.describe();
+  EXPECT_FALSE(r.maps("libproprio_source_stretch_glove.so")) << r.describe();
   EXPECT_FALSE(r.maps("libproprio_source_vist.so")) << r.describe();
 }
 

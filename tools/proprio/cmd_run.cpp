@@ -51,6 +51,29 @@ int run_scene(const RunArgs& a) {
   return 0;
 }
 
+// --ftm-calibration feeds only --hands ftm; --tracker only the simulated
+// peg-in-hole study (a real participant's glove is --hands ftm). An empty
+// value given on purpose would read as "not given": refused too.
+Status check_ftm_options(const RunArgs& a, bool calibration_given, bool tracker_given) {
+  if (calibration_given && a.ftm_calibration.empty()) {
+    return make_error(Errc::invalid_argument, "--ftm-calibration '': give the FTM calibration file (from 'proprio "
+                                              "calibrate ftm')");
+  }
+  if (calibration_given && a.hands.front() != "ftm") {
+    return make_error(Errc::invalid_argument, "--ftm-calibration applies only to --hands ftm [sim|device], not "
+                                              "--hands " + a.hands.front());
+  }
+  if (tracker_given && a.tracker.empty()) {
+    return make_error(Errc::invalid_argument,
+                      "--tracker '': choose ideal (the commanded hand) or ftm (the simulated FTM glove)");
+  }
+  if (tracker_given && (a.scene != "peg-in-hole" || a.participant.empty())) {
+    return make_error(Errc::invalid_argument, "--tracker applies only to 'proprio run peg-in-hole --participant "
+                                              "sim'; a live hand's glove is --hands (e.g. --hands ftm sim)");
+  }
+  return {};
+}
+
 int run(const RunArgs& a) {
   if (!a.participant.empty()) {
 #ifdef PROPRIO_HAVE_PERCEPTION_THRESHOLD
@@ -180,6 +203,11 @@ Result<engine::AppInputs> app_inputs_from(const RunArgs& a, const engine::Scene&
       sc.seed = a.seed;
     }
     auto src = hand_sources::start_hand_source(sc, 50 * kNsPerMillisecond);
+    // The source's message may not name the file (a calibration for the other hand).
+    if (!src && kind == "ftm" && !sc.calibration.empty()) {
+      return src.error().with_context("--hands ftm " + sc.input + " --hand " + a.hand + " --ftm-calibration " +
+                                      sc.calibration);
+    }
     if (!src) return src.error();
     std::shared_ptr<HandSource> source = std::move(*src);
     in.hands = a.no_recentre ? source
@@ -279,8 +307,9 @@ void add_run_command(CLI::App& app, int& exit_code) {
                 "above the scene's focus, and the hand keeps that offset)");
   cmd->add_option("--glove-calibration", a->glove_calibration,
                   "--hands glove device: the wearer's min-max calibration (proprio calibrate glove)");
-  cmd->add_option("--ftm-calibration", a->ftm_calibration,
-                  "--hands ftm device: the FTM glove's calibration (proprio calibrate ftm)");
+  auto* ftm_calibration_option = cmd->add_option("--ftm-calibration", a->ftm_calibration,
+                                                 "--hands ftm: the FTM glove's calibration (proprio calibrate ftm); "
+                                                 "needed for a board (device), optional for a simulated wearer (sim)");
   cmd->add_option("--haptics", a->haptics,
                   "sim (emulated fingertip devices), hid (fingertip devices on USB, one per --fingers) or none")
       ->check(CLI::IsMember({"sim", "hid", "none"}))
@@ -322,12 +351,19 @@ void add_run_command(CLI::App& app, int& exit_code) {
                   "or a real participant's id (its number sets the counterbalancing position: P07 is the 7th)");
   cmd->add_option("--participants", a->participants, "--participant sim: how many")->capture_default_str();
   cmd->add_option("--design", a->design, "the study's config file (default: the published protocol)");
-  cmd->add_option("--tracker", a->tracker, "peg-in-hole --participant sim: ideal (the commanded hand) or ftm (a simulated FTM glove)");
+  auto* tracker_option = cmd->add_option(
+      "--tracker", a->tracker, "peg-in-hole --participant sim: ideal (the commanded hand) or ftm (a simulated FTM glove)");
   cmd->add_flag("--resume", a->resume, "continue the crashed session in --out at its next trial");
   cmd->add_flag("--force", a->force, "overwrite session data already in --out");
   cmd->add_option("--calibration", a->calibration,
                   "perception-threshold: the HMD calibration to apply (written by 'run hmd-calibration')");
-  cmd->callback([a, &exit_code, out_option, seed_option, device_option] {
+  cmd->callback([a, &exit_code, out_option, seed_option, device_option, ftm_calibration_option, tracker_option] {
+    // A value that would be silently ignored is refused: a user who names
+    // their calibration or a tracker must get it, or be told why not.
+    if (auto st = check_ftm_options(*a, ftm_calibration_option->count() > 0, tracker_option->count() > 0); !st) {
+      exit_code = report_error(st.error());
+      return;
+    }
     a->out_given = out_option->count() > 0;
     a->device_given = device_option->count() > 0;
     a->seed_given = seed_option->count() > 0;

@@ -292,11 +292,6 @@ double watch(StretchDevice& device, double seconds, double interval_s, LatestVal
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-void print_state(StretchLinkState state, std::string_view detail) {
-  // On the reader thread; stdout is line-buffered per call.
-  std::printf("[%s] %.*s\n", to_string(state), static_cast<int>(detail.size()), detail.data());
-  std::fflush(stdout);
-}
 
 int monitor_live(const MonitorArgs& a) {
   hid::HidDeviceSelector sel = stretch_board_selector();
@@ -312,7 +307,7 @@ int monitor_live(const MonitorArgs& a) {
   StretchDeviceOptions o;
   o.stream = stream_options(a);
   StretchDevice device(std::make_unique<hid::HidapiTransport>(sel), o);
-  device.set_state_callback(print_state);
+  device.set_state_callback(print_link_state);
   if (a.seconds > 0) {
     std::printf("monitoring %s for %g s (Ctrl-C stops early)\n", sel.describe().c_str(), a.seconds);
   } else {
@@ -350,17 +345,6 @@ struct EmulateArgs {
   std::vector<std::string> unplugs;
 };
 
-std::string check_unplug(const std::string& text) {
-  const auto colon = text.find(':');
-  char* end = nullptr;
-  if (colon == std::string::npos) return "'" + text + "': use AT:FOR, seconds, e.g. 2.5:1";
-  const double at = std::strtod(text.substr(0, colon).c_str(), &end);
-  if (*end != '\0' || !(at >= 0)) return "'" + text + "': AT must be seconds >= 0";
-  const double dur = std::strtod(text.substr(colon + 1).c_str(), &end);
-  if (*end != '\0' || !(dur > 0)) return "'" + text + "': FOR must be seconds > 0";
-  return {};
-}
-
 // Slowly varying synthetic capacitances: each combination its own level (a
 // measurement sums a few cells of ~20 pF), drifting by ±5 pF at 0.1-0.4 Hz
 // with its own phase, as a hand moving slowly would.
@@ -392,9 +376,8 @@ StretchEmulatorOptions emulator_options(const EmulateArgs& a) {
   eo.faults.saturate_probability = a.saturate;
   eo.faults.device_overrun_probability = a.overrun;
   for (const std::string& u : a.unplugs) {
-    const auto colon = u.find(':');
-    eo.faults.unplugs.push_back({seconds_to_ns(std::strtod(u.substr(0, colon).c_str(), nullptr)),
-                                 seconds_to_ns(std::strtod(u.substr(colon + 1).c_str(), nullptr))});
+    // Checked by the option already (check_board_unplug).
+    if (auto at_for = parse_board_unplug(u)) eo.faults.unplugs.push_back({at_for->first, at_for->second});
   }
   return eo;
 }
@@ -448,7 +431,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   o.reconnect_backoff_max_ns = 200 * kNsPerMillisecond;
   o.deliver_flagged = true;  // the self-test checks that flagged readings are the injected ones
   StretchDevice device(std::make_unique<hid::FakeHidTransport>(link), o);
-  device.set_state_callback(print_state);
+  device.set_state_callback(print_link_state);
   std::printf("emulating a %d x %d strip board (%d combinations) at %d measurements/s for %g s over the in-memory HID "
               "link, seed %llu\n",
               a.top_strips, a.bottom_strips, a.top_strips * a.bottom_strips, a.rate_hz, a.seconds, ull(a.seed));
@@ -606,7 +589,7 @@ void add_stretch_board_command(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(0.0, 1.0));
   emu_cmd->add_option("--unplug", emu->unplugs,
                       "AT:FOR in seconds: the board loses power at AT for FOR, then boots again (repeatable)")
-      ->check([](const std::string& s) { return check_unplug(s); });
+      ->check([](const std::string& s) { return check_board_unplug(s); });
   emu_cmd->add_option("--out", emu->out, "Write the reports to this capture file instead of running the self-test");
   emu_cmd->add_flag("--force", emu->force, "Overwrite an existing --out file");
   emu_cmd->callback([emu, &exit_code] { exit_code = run_emulate(*emu); });

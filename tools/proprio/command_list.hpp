@@ -25,6 +25,10 @@ void add_stretch_glove_commands(CLI::App& app, int& exit_code);
 void add_ftm_commands(CLI::App& app, int& exit_code);
 // `stretch-board emulate|monitor|list`: the stretch glove's USB HID read-out board.
 void add_stretch_board_command(CLI::App& app, int& exit_code);
+// `calibrate ftm`: the FTM glove's guided per-user calibration.
+void add_calibrate_ftm_command(CLI::App& app, int& exit_code);
+// `ftm-board emulate|monitor|list`: the FTM glove's USB HID read-out board.
+void add_ftm_board_command(CLI::App& app, int& exit_code);
 // `haptics sim|mjcf|devices|test` and `bench haptics`.
 void add_haptics_commands(CLI::App& app, int& exit_code);
 void add_haptics_device_commands(CLI::App& haptics, int& exit_code);

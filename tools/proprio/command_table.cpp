@@ -46,7 +46,7 @@ constexpr CommandInfo kCommands[] = {
      Family::haptics, false},
     {"calibrate",
      "Calibrate sensors: 'calibrate stereo' for VIST's camera, 'calibrate glove' for the stretch glove, "
-     "'calibrate wrist' for a tracked device's offset to the wrist",
+     "'calibrate ftm' for the FTM glove, 'calibrate wrist' for a tracked device's offset to the wrist",
      Family::split, true},
     {"calibrate stereo",
      "Calibrate VIST's stereo camera from checkerboard image pairs (docs/stereo-camera.md).\n"
@@ -61,6 +61,13 @@ constexpr CommandInfo kCommands[] = {
     {"calibrate glove",
      "Per-user min-max calibration of the stretch glove (Glauser 2019, Sec. 5.3.3): explore extreme poses while\n"
      "the per-cell 20-frame medians' min and max are collected; prints which fingers need more movement.",
+     Family::trackers, false},
+    {"calibrate ftm",
+     "Per-user calibration of the FTM glove (docs/ftm.md), guided on stdout: a figure-eight until every compass has\n"
+     "seen enough directions, then the three known poses, each taken once the hand moved into it and held still.\n"
+     "Solves the compasses' hard/soft iron and the field, the bend sensors' beta0/beta1 and the IMU mountings, prints\n"
+     "them with their residuals and writes a per-user TOML file (atomically; nothing on failure). From a board on\n"
+     "USB, the board emulator with a simulated wearer (--subject N --emulate) or the simulated wearer alone.",
      Family::trackers, false},
 #if defined(PROPRIO_HAVE_ENGINE) && defined(PROPRIO_HAVE_OPENXR_LAYER)
     {"calibrate wrist",
@@ -95,6 +102,11 @@ constexpr CommandInfo kCommands[] = {
      "The stretch glove's USB HID read-out board (13 x 14 strips, 960 measurements/s; protocol in "
      "docs/stretch-glove-hid-protocol.md): list devices, monitor a board or a capture file, or run an emulated board "
      "as a self-test.",
+     Family::devices, true},
+    {"ftm-board",
+     "The FTM glove's USB HID read-out board (4 IMUs at 200 Hz, 3 bend sensors at 1 kHz; protocol in "
+     "docs/ftm-hid-protocol.md): list devices, monitor a board, or run an emulated board worn by a simulated "
+     "subject as a self-test.",
      Family::devices, true},
     {"haptics", "Contact simulation and fingertip haptic devices", Family::haptics, true},
 #ifdef PROPRIO_HAVE_STUDY

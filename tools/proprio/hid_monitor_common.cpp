@@ -1,6 +1,7 @@
 #include "hid_monitor_common.hpp"
 
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 
 #include "proprio/core/log.hpp"
@@ -57,6 +58,30 @@ void add_hid_list_command(CLI::App& parent, const HidBoardKind& kind, const std:
   list_cmd->add_option("--vid", list->vid, "USB vendor ID, hexadecimal")->check(check_hex)->capture_default_str();
   list_cmd->add_option("--pid", list->pid, "USB product ID, hexadecimal")->check(check_hex)->capture_default_str();
   list_cmd->callback([list, kind, &exit_code] { exit_code = run_hid_list(*list, kind); });
+}
+
+std::string check_board_unplug(const std::string& text) {
+  const auto colon = text.find(':');
+  char* end = nullptr;
+  if (colon == std::string::npos) return "'" + text + "': use AT:FOR, seconds, e.g. 2.5:1";
+  const double at = std::strtod(text.substr(0, colon).c_str(), &end);
+  if (*end != '\0' || !(at >= 0) || !(at < 1e6)) return "'" + text + "': AT must be seconds >= 0";
+  const double dur = std::strtod(text.substr(colon + 1).c_str(), &end);
+  if (*end != '\0' || !(dur > 0) || !(dur < 1e6)) return "'" + text + "': FOR must be seconds > 0";
+  return {};
+}
+
+Result<std::pair<TimeNs, DurationNs>> parse_board_unplug(const std::string& text) {
+  if (std::string why = check_board_unplug(text); !why.empty()) return make_error(Errc::invalid_argument, "--unplug " + why);
+  const auto colon = text.find(':');
+  return std::pair<TimeNs, DurationNs>{seconds_to_ns(std::strtod(text.substr(0, colon).c_str(), nullptr)),
+                                       seconds_to_ns(std::strtod(text.substr(colon + 1).c_str(), nullptr))};
+}
+
+void print_link_state(hid::LinkState state, std::string_view detail) {
+  // On the reader thread; one printf and a flush per change.
+  std::printf("[%s] %.*s\n", hid::to_string(state), static_cast<int>(detail.size()), detail.data());
+  std::fflush(stdout);
 }
 
 void add_hid_monitor_options(CLI::App& monitor, HidMonitorArgs& args, const std::string& serial_help) {

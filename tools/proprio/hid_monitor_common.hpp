@@ -4,8 +4,12 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <string>
+#include <string_view>
+#include <utility>
 
 #include "commands.hpp"
+#include "proprio/core/time.hpp"
+#include "proprio/hid/link_state.hpp"
 
 namespace proprio::cli {
 
@@ -36,5 +40,14 @@ struct HidMonitorArgs {
 
 // Adds --vid, --pid, --serial (help: serial_help), --path, --seconds and --interval.
 void add_hid_monitor_options(CLI::App& monitor, HidMonitorArgs& args, const std::string& serial_help);
+
+// An emulated board's `--unplug AT:FOR` (seconds): the CLI11 check (empty when
+// acceptable, else why not) and the parsed (at, duration) in nanoseconds.
+std::string check_board_unplug(const std::string& text);
+Result<std::pair<TimeNs, DurationNs>> parse_board_unplug(const std::string& text);
+
+// Prints a board link's state changes ("[streaming] /dev/hidraw3"); for
+// set_state_callback, on the reader thread.
+void print_link_state(hid::LinkState state, std::string_view detail);
 
 }  // namespace proprio::cli

@@ -68,6 +68,12 @@ Result<std::vector<double>> doubles_n(const Config& c, const std::string& table,
 // ---------------------------------------------------------------- FtmCalibration
 
 Status FtmCalibration::validate() const {
+  for (std::size_t i = 0; i < kFtmImuCount; ++i) {
+    if (!accel_bias_mps2[i].allFinite() || !gyro_bias_radps[i].allFinite()) {
+      return make_error(Errc::invalid_argument, "FtmCalibration.accel_bias_mps2/gyro_bias_radps[" +
+                                                    std::to_string(i) + "] must be finite");
+    }
+  }
   if (auto s = HandShape::from_measurements(hand_length_m, hand_width_m); !s) {
     return s.error().with_context("FtmCalibration.hand_length_m/hand_width_m");
   }
@@ -358,9 +364,10 @@ void FtmPoseCollector::push(const FtmEvent& e) noexcept {
       std::optional<Vec3> mag;
       if (s.mag_fresh && !(s.status & sample_status::mag_overflow) && s.mag_uT.allFinite())
         mag = cal_.mag[e.index].apply(s.mag_uT);
-      filters_[e.index].update(t, s.gyro_radps, s.accel_mps2, mag);
+      filters_[e.index].update(t, s.gyro_radps, s.accel_mps2 - cal_.accel_bias_mps2[e.index], mag);
       if (gyro_n_[e.index] == 0) first_ns_[e.index] = t;
       gyro_[e.index][gyro_n_[e.index]++ % kRing] = {t, s.gyro_radps.norm()};
+      gyro_vec_[e.index][(gyro_n_[e.index] - 1) % kRing] = s.gyro_radps;
       ++samples_;
       break;
     }
@@ -418,12 +425,16 @@ Result<FtmPoseCapture> FtmPoseCollector::finish() const {
     c.q_world_imu[i] = filters_[i].q_world_body();
     double ss = 0.0;
     std::size_t m = 0;
+    Vec3 sum = Vec3::Zero();
     for (std::size_t j = 0; j < std::min(gyro_n_[i], kRing); ++j) {
-      const TimedValue& v = gyro_[i][(gyro_n_[i] - 1 - j) % kRing];
+      const std::size_t k = (gyro_n_[i] - 1 - j) % kRing;
+      const TimedValue& v = gyro_[i][k];
       if (v.t < newest_ns_ - kWindow) break;
       ss += v.v * v.v;
+      sum += gyro_vec_[i][k];
       ++m;
     }
+    c.gyro_mean_radps[i] = m ? Vec3(sum / static_cast<double>(m)) : Vec3::Zero();
     c.gyro_rms_radps = std::max(c.gyro_rms_radps, m ? std::sqrt(ss / static_cast<double>(m)) : 0.0);
   }
   for (std::size_t b = 0; b < kFtmBendCount; ++b) {
@@ -503,9 +514,10 @@ Result<FtmCalibration> solve_mag_and_field(std::span<const FtmEvent> events, Ftm
     if (e.kind != FtmEvent::Kind::imu || e.index != d || !e.imu.mag_fresh || e.imu.status != 0 ||
         !e.imu.mag_uT.allFinite() || !e.imu.accel_mps2.allFinite())
       continue;
-    const double an = e.imu.accel_mps2.norm();
+    const Vec3 accel = e.imu.accel_mps2 - base.accel_bias_mps2[d];
+    const double an = accel.norm();
     if (std::abs(an - g) > 0.2 * g) continue;
-    const Vec3 up = e.imu.accel_mps2 / an;
+    const Vec3 up = accel / an;
     const Vec3 m = base.mag[d].apply(e.imu.mag_uT);
     v += m.dot(up);
     h += (m - m.dot(up) * up).norm();
@@ -603,11 +615,42 @@ Result<FtmCalibration> solve_three_pose(std::span<const FtmPoseCapture> captures
   return base;
 }
 
-Result<FtmCalibrationOutcome> calibrate_ftm(const FtmCalibrationRecording& recording, const FtmCalibration& base,
-                                            const MahonyOptions& attitude, const MagFitOptions& mag) {
+Status FtmTurnOnBiasOptions::validate() const {
+  if (auto st = accel_fit.validate(); !st) return st.error().with_context("FtmTurnOnBiasOptions.accel_fit");
+  if (!std::isfinite(max_pose_gyro_disagreement_radps) || !(max_pose_gyro_disagreement_radps > 0.0)) {
+    return make_error(Errc::invalid_argument, "FtmTurnOnBiasOptions.max_pose_gyro_disagreement_radps must be > 0 (" +
+                                                  describe() + ")");
+  }
+  return {};
+}
+
+std::string FtmTurnOnBiasOptions::describe() const {
+  return std::string("accel offset from the figure-eight: ") + (fit_accel ? accel_fit.describe() : "off") +
+         "; gyro offset from the poses: " + (gyro_from_poses ? "mean rate over the three still windows when they agree within " +
+                                std::to_string(max_pose_gyro_disagreement_radps * 180.0 / M_PI) + " deg/s"
+                          : std::string("off"));
+}
+
+Result<FtmCalibrationOutcome> calibrate_ftm(const FtmCalibrationRecording& recording, const FtmCalibration& base_in,
+                                            const MahonyOptions& attitude, const MagFitOptions& mag,
+                                            const FtmTurnOnBiasOptions& bias) {
+  if (auto st = bias.validate(); !st) return st.error();
+  FtmCalibration base = base_in;
+  FtmCalibrationOutcome out;
+  if (bias.fit_accel) {
+    for (std::size_t i = 0; i < kFtmImuCount; ++i) {
+      auto fit = fit_accel_bias(imu_samples_of(recording.figure_eight, i), bias.accel_fit);
+      // A refused fit is not fatal: that IMU runs uncorrected, as before.
+      if (fit) {
+        base.accel_bias_mps2[i] = fit->bias_mps2;
+        out.accel_bias_fitted[i] = true;
+      } else {
+        out.accel_bias_note[i] = fit.error().message;
+      }
+    }
+  }
   auto field = solve_mag_and_field(recording.figure_eight, base, mag);
   if (!field) return make_error(field.error().code, "compass calibration (figure-eight): " + field.error().message);
-  FtmCalibrationOutcome out;
   for (std::size_t k = 0; k < kFtmCalibrationPoseCount; ++k) {
     const auto pose = static_cast<FtmCalibrationPose>(k);
     FtmPoseCollector collector(pose, *field, attitude);
@@ -627,6 +670,31 @@ Result<FtmCalibrationOutcome> calibrate_ftm(const FtmCalibrationRecording& recor
   auto solved = solve_three_pose(out.captures, *field);
   if (!solved) return solved.error();
   out.calibration = std::move(*solved);
+  if (bias.gyro_from_poses) {
+    // The poses are held still (FtmPoseCollector::still, a loose 8.6 °/s):
+    // the mean rate over each window is the gyro's offset plus whatever the
+    // hand still turned. Only when the three poses agree (a hand truly at
+    // rest) is their mean taken as the offset; otherwise the filters learn it
+    // online, as without this step.
+    for (std::size_t i = 0; i < kFtmImuCount; ++i) {
+      Vec3 sum = Vec3::Zero();
+      for (const auto& c : out.captures) sum += c.gyro_mean_radps[i];
+      const Vec3 mean = sum / static_cast<double>(kFtmCalibrationPoseCount);
+      double worst = 0.0;
+      for (const auto& c : out.captures) worst = std::max(worst, (c.gyro_mean_radps[i] - mean).norm());
+      if (worst <= bias.max_pose_gyro_disagreement_radps) {
+        out.calibration.gyro_bias_radps[i] = mean;
+        out.gyro_bias_estimated[i] = true;
+      } else {
+        char buf[200];
+        std::snprintf(buf, sizeof buf,
+                      "gyro offset not taken from the poses: their mean rates differ by up to %.3g deg/s "
+                      "(> %.3g): the hand was turning",
+                      worst * 180.0 / M_PI, bias.max_pose_gyro_disagreement_radps * 180.0 / M_PI);
+        out.gyro_bias_note[i] = buf;
+      }
+    }
+  }
   return out;
 }
 

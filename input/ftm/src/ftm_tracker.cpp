@@ -31,6 +31,7 @@ Status FtmTrackerOptions::validate() const {
   if (bend_timeout_ns <= 0) return make_error(Errc::invalid_argument, "FtmTrackerOptions.bend_timeout_ns must be > 0");
   if (wrist_timeout_ns <= 0)
     return make_error(Errc::invalid_argument, "FtmTrackerOptions.wrist_timeout_ns must be > 0");
+  if (auto s = still.validate(); !s) return s.error().with_context("FtmTrackerOptions.still");
   return {};
 }
 
@@ -43,7 +44,8 @@ std::string FtmTrackerOptions::describe() const {
                 synergies.thumb_ip_from_mcp, thumb_cmc_axis_offset_m * 1e3, track_abduction ? "tracked" : "held at 0",
                 static_cast<double>(imu_timeout_ns) * 1e-6, static_cast<double>(bend_timeout_ns) * 1e-6,
                 static_cast<double>(wrist_timeout_ns) * 1e-6);
-  return buf + attitude.describe();
+  return buf + std::string("turn-on gyro offset from a still start: ") +
+         (still_start_gyro_bias ? still.describe() : std::string("off")) + "; " + attitude.describe();
 }
 
 Result<FtmTracker> FtmTracker::create(const FtmTrackerOptions& options, const FtmCalibration& calibration) {
@@ -61,7 +63,13 @@ Result<FtmTracker> FtmTracker::create(const FtmTrackerOptions& options, const Ft
   if (auto s = mo.validate(); !s) return s.error().with_context("FTM tracker: calibrated Earth field");
   std::vector<MahonyFilter> filters;
   filters.reserve(kFtmImuCount);
-  for (std::size_t i = 0; i < kFtmImuCount; ++i) filters.emplace_back(mo);
+  for (std::size_t i = 0; i < kFtmImuCount; ++i) {
+    // The calibration's turn-on gyro offset seeds each bias integrator (it
+    // keeps learning from there); zero means none was estimated.
+    MahonyOptions mi = mo;
+    if (!calibration.gyro_bias_radps[i].isZero()) mi.initial_bias_radps = calibration.gyro_bias_radps[i];
+    filters.emplace_back(mi);
+  }
   return FtmTracker(options, calibration, HandModel(*shape), std::move(filters));
 }
 
@@ -80,6 +88,12 @@ FtmTracker::FtmTracker(const FtmTrackerOptions& options, const FtmCalibration& c
 
 void FtmTracker::reset() noexcept {
   for (auto& f : filters_) f.reset();
+  for (std::size_t i = 0; i < kFtmImuCount; ++i) {
+    still_[i] = StillBiasAccumulator(options_.still);
+    turn_on_state_[i] = !calibration_.gyro_bias_radps[i].isZero() ? TurnOnBias::from_calibration
+                        : options_.still_start_gyro_bias         ? TurnOnBias::pending
+                                                                 : TurnOnBias::off;
+  }
   raw_.fill(0.0);
   angles_.fill(0.0);
   thumb_ps_rad_ = 0.0;
@@ -130,10 +144,19 @@ void FtmTracker::push_imu(FtmImu imu, const FtmImuSample& s) noexcept {
     last_accel_[i] = s.accel_mps2;
     last_gyro_[i] = s.gyro_radps;
   }
+  if (turn_on_state_[i] == TurnOnBias::pending && !still_[i].add(s) && still_[i].complete()) {
+    // The window is over: seed the bias from it, or leave it to the filter.
+    if (const auto b = still_[i].accepted_gyro_bias()) {
+      filters_[i].set_gyro_bias(*b);
+      turn_on_state_[i] = TurnOnBias::estimated;
+    } else {
+      turn_on_state_[i] = TurnOnBias::refused;
+    }
+  }
   std::optional<Vec3> mag;
   if (s.mag_fresh && !(s.status & sample_status::mag_overflow) && s.mag_uT.allFinite())
     mag = calibration_.mag[i].apply(s.mag_uT);
-  imu_flags_[i] = filters_[i].update(s.time_ns, s.gyro_radps, s.accel_mps2, mag);
+  imu_flags_[i] = filters_[i].update(s.time_ns, s.gyro_radps, s.accel_mps2 - calibration_.accel_bias_mps2[i], mag);
   if (!(imu_flags_[i] & kTimeNotAdvancing) && filters_[i].initialised() &&
       filters_[i].q_world_body().coeffs().allFinite()) {
     imu_good_ns_[i] = s.time_ns;

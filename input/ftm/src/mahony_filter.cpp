@@ -113,6 +113,13 @@ void MahonyFilter::reset() noexcept {
   detector_.reset();
 }
 
+void MahonyFilter::set_gyro_bias(const Vec3& bias_radps) noexcept {
+  if (!bias_radps.allFinite()) return;
+  bias_radps_ = bias_radps;
+  const double b = bias_radps_.norm();
+  if (b > options_.max_bias_radps) bias_radps_ *= options_.max_bias_radps / b;
+}
+
 bool MahonyFilter::try_initialise(const Vec3& accel, const Vec3& mag) noexcept {
   const Result<Quat> q = markley_attitude(accel, mag, options_.gravity_ref_in_world_mps2,
                                           options_.mag_ref_in_world_uT, options_.init_weights);

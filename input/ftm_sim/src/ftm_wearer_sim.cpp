@@ -647,6 +647,12 @@ FtmWearerSimulator::Truth FtmWearerSimulator::truth_at(TimeNs t) const {
     tr.mag_disturbance_uT[i] = d.norm() * 1e6;
     const double angle = std::acos(std::clamp(total.normalized().dot(earth.normalized()), -1.0, 1.0));
     const double dmag = std::abs(total.norm() - earth.norm()) / earth.norm();
+    const Vec3 up = Vec3::UnitY();  // OpenXR world
+    const Vec3 h_total = total - total.dot(up) * up, h_earth = earth - earth.dot(up) * up;
+    tr.mag_heading_deviation_rad[i] = std::atan2(h_total.cross(h_earth).norm(), h_total.dot(h_earth));
+    tr.mag_norm_deviation[i] = dmag;
+    auto dip = [&up](const Vec3& f) { return std::asin(std::clamp(-f.normalized().dot(up), -1.0, 1.0)); };
+    tr.mag_dip_deviation_rad[i] = std::abs(dip(total) - dip(earth));
     tr.mag_disturbed[i] = angle > options_.magnetic.disturbed_angle_rad ||
                           dmag > options_.magnetic.disturbed_magnitude_fraction;
   }

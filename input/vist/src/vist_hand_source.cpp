@@ -110,6 +110,7 @@ void VistHandSource::run() {
         auto& f = std::get<VistStereoFrame>(item);
         tracker_.add_stereo_frame(f.capture_time_ns, f.left, f.right, f.T_world_leftcam);
       }
+      last_vision_fix_ns_.store(tracker_.last_vision_fix_ns(), std::memory_order_release);
     }
     batch.clear();
     std::lock_guard lock(history_mutex_);

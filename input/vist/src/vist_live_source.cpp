@@ -58,7 +58,7 @@ VistLiveSource::~VistLiveSource() {
 }
 
 bool VistLiveSource::vision_lost(TimeNs t_ns) const noexcept {
-  const TimeNs last = input_->last_frame_capture_ns();
+  const TimeNs last = tracker_->last_vision_fix_ns();
   return last == 0 || t_ns - last > seconds_to_ns(options_.vision_timeout_s);
 }
 

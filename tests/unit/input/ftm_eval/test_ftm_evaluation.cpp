@@ -1,4 +1,4 @@
-// The FTM bench's cases on one short held-out session each: they run the
+// The FTM bench's cases on one short held-in session each (subject 0): they run the
 // whole pipeline (calibration from the simulated wearer included) and give
 // finite errors under generous bounds (several times what the bench
 // measures: these catch a broken stage, not a tenth of a degree), and a case
@@ -14,6 +14,7 @@ namespace ftm_evaluation_test {
 
 FtmBenchOptions fe_small() {
   FtmBenchOptions o;
+  o.first_subject = 0;  // held-in: `bench ftm` keeps 10-14 for itself
   o.subjects = 1;
   o.task_s = 6.0;
   o.seed = 3;
@@ -60,6 +61,41 @@ TEST(FtmEvaluation, DisturbanceCaseCountsBothKindsOfSample) {
   // The gated filter must not be worse than a random heading.
   EXPECT_LT(r.metric("heading_during_gated_mean_deg"), 45.0);
   EXPECT_TRUE(std::isfinite(r.metric("heading_during_plain_mean_deg")));
+}
+
+// The turn-on offsets (imu_bias.hpp) are what the bench's error was made of:
+// estimated from the readings, the error drops well below the ablation's.
+TEST(FtmEvaluation, ImuBenchTurnOnBiasEstimationRemovesMostOfTheError) {
+  auto o = fe_small();
+  const auto with = run_ftm_case(FtmCase::imu_bench, o);
+  o.bench_turn_on_bias = false;
+  const auto without = run_ftm_case(FtmCase::imu_bench, o);
+  ASSERT_TRUE(with.ran) << with.reason;
+  ASSERT_TRUE(without.ran) << without.reason;
+  EXPECT_LT(with.metric("euler_mean_deg"), 0.8);
+  EXPECT_LT(with.metric("euler_mean_deg"), 0.5 * without.metric("euler_mean_deg"));
+}
+
+TEST(FtmEvaluation, DisturbanceTruthAndSubjectsAreValidated) {
+  auto o = fe_small();
+  o.disturbance_truth_heading_deg = 0.0;
+  ASSERT_FALSE(o.validate().ok());
+  EXPECT_NE(o.validate().error().message.find("disturbance_truth_heading_deg"), std::string::npos);
+  o = fe_small();
+  o.first_subject = 14;
+  o.subjects = 2;  // 14 and 15: there is no subject 15
+  ASSERT_FALSE(o.validate().ok());
+  EXPECT_NE(o.validate().error().message.find("subjects"), std::string::npos);
+  o = fe_small();
+  o.detector.norm_tolerance = -1.0;
+  ASSERT_FALSE(o.validate().ok());
+  EXPECT_NE(o.validate().error().message.find("detector"), std::string::npos);
+  // The disturbance case reports the heading-only rate and the simulator's
+  // definition beside the headline.
+  const auto r = run_ftm_case(FtmCase::disturbance, fe_small());
+  ASSERT_TRUE(r.ran) << r.reason;
+  EXPECT_TRUE(std::isfinite(r.metric("detector_hit_rate_heading_only")));
+  EXPECT_TRUE(std::isfinite(r.metric("detector_hit_rate_field_2deg_3pct")));
 }
 
 TEST(FtmEvaluation, CaseThatCannotRunReportsWhy) {

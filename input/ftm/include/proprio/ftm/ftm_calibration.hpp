@@ -21,6 +21,7 @@
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
 #include "proprio/ftm/ftm_glove.hpp"
+#include "proprio/ftm/imu_bias.hpp"
 #include "proprio/ftm/mag_calibration.hpp"
 #include "proprio/ftm/mahony_filter.hpp"
 
@@ -41,6 +42,13 @@ struct FtmCalibration {
   // The local field in the world frame: the reference of the Mahony filters
   // and the disturbance detector.
   Vec3 earth_field_world_uT = MahonyOptions{}.mag_ref_in_world_uT;
+  // Turn-on offsets (imu_bias.hpp) of this power-up, subtracted from every
+  // reading before the filters: the accelerometer's from the figure-eight,
+  // the gyro's seeds the filters' bias (from the still calibration poses).
+  // Session values: not saved in the TOML file (they change at each
+  // power-up); a loaded calibration has zeros until calibrate_ftm runs again.
+  std::array<Vec3, kFtmImuCount> accel_bias_mps2{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+  std::array<Vec3, kFtmImuCount> gyro_bias_radps{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
 
   Status validate() const;
   std::string describe() const;
@@ -85,6 +93,8 @@ struct FtmPoseCapture {
   Pose T_world_wrist;        // the wrist tracker's last valid pose
   bool wrist_valid = false;  // false: no valid wrist sample was seen
   double gyro_rms_radps = 0.0;  // over the last still window, worst IMU
+  // Mean rate per IMU over the same window: the gyro's offset while still.
+  std::array<Vec3, kFtmImuCount> gyro_mean_radps{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
   std::size_t samples = 0;      // IMU samples that went into the filters
 };
 
@@ -123,6 +133,7 @@ class FtmPoseCollector {
   FtmCalibration cal_;
   std::vector<MahonyFilter> filters_;  // one per IMU (no default constructor)
   std::array<std::array<TimedValue, kRing>, kFtmImuCount> gyro_;  // gyro norm
+  std::array<std::array<Vec3, kRing>, kFtmImuCount> gyro_vec_;     // the same samples' rates
   std::array<std::size_t, kFtmImuCount> gyro_n_{};
   std::array<std::array<TimedValue, kRing>, kFtmBendCount> bend_;
   std::array<std::size_t, kFtmBendCount> bend_n_{};
@@ -173,6 +184,28 @@ struct FtmCalibrationRecording {
 struct FtmCalibrationOutcome {
   FtmCalibration calibration;
   std::array<FtmPoseCapture, kFtmCalibrationPoseCount> captures{};
+  // Per IMU: whether the accelerometer offset was fitted, and why not.
+  std::array<bool, kFtmImuCount> accel_bias_fitted{};
+  std::array<std::string, kFtmImuCount> accel_bias_note{};
+  // Per IMU: whether the gyro offset was taken from the poses, and why not.
+  std::array<bool, kFtmImuCount> gyro_bias_estimated{};
+  std::array<std::string, kFtmImuCount> gyro_bias_note{};
+};
+
+// The turn-on offsets calibrate_ftm estimates (imu_bias.hpp), both from the
+// readings alone: the accelerometer's by a sphere fit over the figure-eight,
+// the gyro's as the mean rate while the three poses are held still.
+struct FtmTurnOnBiasOptions {
+  bool fit_accel = true;
+  AccelBiasFitOptions accel_fit;
+  bool gyro_from_poses = true;
+  // The three poses' mean rates must agree within this for their mean to be
+  // taken as the offset: 0.3 °/s is ~20 σ of a 0.5 s mean's noise, while a
+  // held hand that drifts (the simulated wearer's poses differ by 2-4 °/s)
+  // is refused and the filters learn the offset online instead.
+  double max_pose_gyro_disagreement_radps = 0.3 * M_PI / 180.0;
+  Status validate() const;
+  std::string describe() const;
 };
 
 // The whole procedure on a recording: solve_mag_and_field on the
@@ -181,6 +214,7 @@ struct FtmCalibrationOutcome {
 // solve_three_pose. `base` gives hand, size and subject. Errors say which
 // step failed.
 Result<FtmCalibrationOutcome> calibrate_ftm(const FtmCalibrationRecording& recording, const FtmCalibration& base,
-                                            const MahonyOptions& attitude = {}, const MagFitOptions& mag = {});
+                                            const MahonyOptions& attitude = {}, const MagFitOptions& mag = {},
+                                            const FtmTurnOnBiasOptions& bias = {});
 
 }  // namespace proprio::ftm

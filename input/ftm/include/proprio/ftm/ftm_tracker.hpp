@@ -47,6 +47,7 @@
 #include "proprio/core/time.hpp"
 #include "proprio/ftm/ftm_calibration.hpp"
 #include "proprio/ftm/ftm_glove.hpp"
+#include "proprio/ftm/imu_bias.hpp"
 #include "proprio/ftm/mahony_filter.hpp"
 
 namespace proprio::ftm {
@@ -65,6 +66,14 @@ struct FtmTrackerOptions {
   DurationNs imu_timeout_ns = 100'000'000;
   DurationNs bend_timeout_ns = 100'000'000;
   DurationNs wrist_timeout_ns = 500'000'000;
+  // Turn-on gyro offset from a still start (imu_bias.hpp): over each IMU's
+  // first still.window_s of samples, if the glove lay still (on a table), the
+  // mean rate seeds that filter's bias; a moving start is refused and the
+  // filter learns the offset online (turn_on_gyro_bias() tells which). Not
+  // used for an IMU whose calibration already carries a gyro offset
+  // (calibrate_ftm's still poses): that is the same power-up's estimate.
+  bool still_start_gyro_bias = true;
+  StillBiasOptions still;
 
   Status validate() const;
   std::string describe() const;
@@ -90,6 +99,11 @@ class FtmTracker {
   double thumb_pronation_rad() const noexcept { return thumb_ps_rad_; }
   std::uint32_t imu_flags(FtmImu imu) const noexcept { return imu_flags_[index_of(imu)]; }
   bool mag_disturbed(FtmImu imu) const noexcept { return filters_[index_of(imu)].detector().disturbed(); }
+  // The filter's current gyro-bias estimate (rad/s, IMU axes).
+  const Vec3& gyro_bias_radps(FtmImu imu) const noexcept { return filters_[index_of(imu)].gyro_bias_radps(); }
+  // What the still-start estimate did for this IMU (still_start_gyro_bias).
+  enum class TurnOnBias : std::uint8_t { off, pending, estimated, refused, from_calibration };
+  TurnOnBias turn_on_gyro_bias(FtmImu imu) const noexcept { return turn_on_state_[index_of(imu)]; }
   // Whether the IMU / bend sensor currently counts (see the header comment).
   bool imu_ok(FtmImu imu) const noexcept;
   bool bend_ok(FtmBend bend) const noexcept;
@@ -110,6 +124,8 @@ class FtmTracker {
   FtmCalibration calibration_;
   HandModel model_;
   std::vector<MahonyFilter> filters_;
+  std::array<StillBiasAccumulator, kFtmImuCount> still_;
+  std::array<TurnOnBias, kFtmImuCount> turn_on_state_{};
   std::array<Quat, kFtmImuCount> q_rest_conj_{};  // HandModel rest frames, conjugated (thumb, index, middle)
   HandAngles raw_{};     // measured DOFs (before synergies and followers)
   HandAngles angles_{};  // what estimate reports

@@ -147,7 +147,12 @@ class MahonyFilter {
   const MagDisturbanceDetector& detector() const noexcept { return detector_; }
   const MahonyOptions& options() const noexcept { return options_; }
   // Forgets attitude, bias and time; the next usable sample initialises again.
+  // The bias restarts at initial_bias_radps (or zero).
   void reset() noexcept;
+  // Seeds the bias integrator with an external estimate (a turn-on still
+  // window, imu_bias.hpp), clamped to max_bias_radps like the integrator's
+  // own; the integrator goes on learning from it. Non-finite input is ignored.
+  void set_gyro_bias(const Vec3& bias_radps) noexcept;
 
  private:
   bool try_initialise(const Vec3& accel, const Vec3& mag) noexcept;

@@ -6,16 +6,20 @@
 //
 // Cases:
 //  * imu_bench: the thesis's bench, one IMU turned about 90° about X, Y and Z
-//    in turn (sim::ImuSimulator, MPU-9250 noise, raw compass), its compass
-//    calibrated from a figure-eight first; error of the ZYX Euler angles of the
+//    in turn (sim::ImuSimulator, MPU-9250 noise and turn-on offsets, raw
+//    compass); it lies still for 2 s at turn-on (gyro offset), then its
+//    compass and accelerometer offset are calibrated from a figure-eight; error of the ZYX Euler angles of the
 //    rotation from the start pose while each turn is held.
 //  * free_motion, pinch_grasp: held-out subjects; error of the 9 tracked DOFs,
 //    the synergy DOFs (reported apart, not tracked) and the thumb/index/middle
 //    fingertips relative to the wrist.
 //  * disturbance: pinch-grasp with the fingertip devices' current on during
 //    contacts and a drill, a fan and an earphone case each held near the hand
-//    for 10 s; the detector's hit and false-alarm rates against the simulator's
-//    "disturbed" truth, and the heading error with gate_mag on and off (two
+//    for 10 s; the detector's hit and false-alarm rates against a truth of
+//    disturbances that matter (FtmBenchOptions::disturbance_truth_heading_deg,
+//    or the true field beyond the detector's own tolerances; its release
+//    window counted apart), the same against the simulator's 2°/3 %
+//    "disturbed", and the heading error with gate_mag on and off (two
 //    trackers fed the same samples).
 // Simulated accuracy is not real-world accuracy.
 #include <cstdint>
@@ -25,6 +29,7 @@
 #include <vector>
 
 #include "proprio/core/result.hpp"
+#include "proprio/ftm/mag_disturbance.hpp"
 
 namespace proprio::ftm_eval {
 
@@ -38,17 +43,34 @@ Result<FtmCase> parse_ftm_case(std::string_view name);
 std::vector<FtmCase> all_ftm_cases();
 
 struct FtmBenchOptions {
-  int subjects = 5;        // held-out subjects kFirstHeldOutSubject, +1, ...
+  // Subjects first_subject, +1, ...: the held-out ones by default. Tuning
+  // (the detector's thresholds) uses the held-in 0..4, never these.
+  int first_subject = kFirstHeldOutSubject;
+  int subjects = 5;
   double task_s = 60.0;    // task length per on-hand session
   std::uint64_t seed = 1;  // first seed; subject i uses seed + i
   // How long each magnetic object stays near the hand (issue: 10 s).
   double disturbance_hold_s = 10.0;
+  // disturbance: the truth the detector is scored against. A compass sample
+  // is disturbed when the dipoles turn the horizontal field at its IMU by more
+  // than this: what matters for heading (the issue's ≤ 3° heading target;
+  // 2° leaves a margin). The simulator's own "disturbed" (2° of direction or
+  // 3 % of magnitude) also counts field changes that move no heading; its
+  // rates are reported too (_field_2deg_3pct).
+  double disturbance_truth_heading_deg = 2.0;
+  // disturbance: the detector the gated and plain trackers run.
+  ftm::MagDisturbanceOptions detector{};
   // imu_bench: how long each 90° turn is held (the error is averaged over it).
   double bench_hold_s = 5.0;
   // imu_bench ablation: the compass without hard and soft iron (its noise and
   // quantisation kept), to tell the figure-eight calibration's share of the
   // bench error. Off in `bench ftm`.
   bool bench_ideal_compass = false;
+  // imu_bench: estimate the IMUs' turn-on offsets from their own readings
+  // (imu_bias.hpp: gyro from a 2 s still start, accelerometer from a sphere
+  // fit over the figure-eight), as a user does. false: the filter learns the
+  // gyro offset online only and the accelerometer's is left in (ablation).
+  bool bench_turn_on_bias = true;
   Status validate() const;  // Errc::invalid_argument naming the field
   std::string describe() const;
 };

@@ -237,6 +237,13 @@ class FtmWearerSimulator final : public ftm::FtmSampleFeed {
     FtmPhase phase = FtmPhase::task;
     std::array<double, ftm::kFtmImuCount> mag_disturbance_uT{};  // |dipoles' field| at each IMU
     std::array<bool, ftm::kFtmImuCount> mag_disturbed{};  // FtmMagneticOptions' definition
+    // How far the dipoles turn the field's horizontal part at each IMU (rad,
+    // about world up, +Y): the heading error a compass would take from them.
+    std::array<double, ftm::kFtmImuCount> mag_heading_deviation_rad{};
+    // |‖field‖ - ‖earth‖| / ‖earth‖ and |dip - earth's dip| (rad) at each
+    // IMU: what a VQF-style detector looks at, without noise or tilt error.
+    std::array<double, ftm::kFtmImuCount> mag_norm_deviation{};
+    std::array<double, ftm::kFtmImuCount> mag_dip_deviation_rad{};
     std::array<double, 3> fingertip_current_A{};  // thumb, index, middle devices
     std::array<double, 3> contact{};              // contact model level in [0, 1]
   };

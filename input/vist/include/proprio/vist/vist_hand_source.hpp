@@ -8,6 +8,7 @@
 // Backpressure: the input queue is bounded. When the tracker falls behind,
 // the oldest queued items are dropped and counted rather than letting latency
 // grow without bound; the tracker then re-acquires as after a dropout.
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -69,6 +70,8 @@ class VistHandSource final : public HandSource {
                       const Clock& clock = MonotonicClock::instance());
 
   VistSourceStats stats() const;
+  // The tracker's last_vision_fix_ns(), readable from any thread without a lock.
+  TimeNs last_vision_fix_ns() const noexcept { return last_vision_fix_ns_.load(std::memory_order_acquire); }
   const VistHandSourceOptions& options() const noexcept { return options_; }
 
  private:
@@ -88,6 +91,7 @@ class VistHandSource final : public HandSource {
   mutable std::mutex history_mutex_;
   PoseHistory history_;
   VistSourceStats published_stats_;  // under history_mutex_
+  std::atomic<TimeNs> last_vision_fix_ns_{0};
 
   std::thread worker_;
   std::unique_ptr<VistSessionPlayer> player_;  // declared last: destroyed first

@@ -13,9 +13,10 @@
 //
 // Inactive hand: besides what the tracker says (not acquired yet, no IMU data:
 // the history goes stale), the hand is reported inactive while no stereo frame
-// has reached the tracker for vision_timeout_s: the camera is gone, or the
-// head pose is unknown so frames cannot be placed in the world. The IMUs alone
-// would drift, and a hand that drifts away is worse than none.
+// has corrected the tracker for vision_timeout_s: the camera is gone, the head
+// pose is unknown so frames cannot be placed in the world, or frames arrive
+// but none of their markers fit the prediction (a lock lost after a replug).
+// The IMUs alone would drift, and a hand that drifts away is worse than none.
 //
 // The camera's place: the stereo rig sits on the head at the glove
 // description's rig.T_head_leftcam (the rectified left camera in the OpenXR
@@ -38,8 +39,9 @@ namespace proprio::vist {
 struct VistLiveSourceOptions {
   VistHandSourceOptions source;
   VistLiveOptions live;
-  // The hand is inactive once the newest stereo frame fused is this much older
-  // than the time asked for (seconds).
+  // The hand is inactive once the newest stereo frame whose markers corrected
+  // the tracker (VistTracker::last_vision_fix_ns) is this much older than the
+  // time asked for (seconds).
   double vision_timeout_s = 1.0;
 
   Status validate() const;

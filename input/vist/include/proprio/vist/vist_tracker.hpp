@@ -135,6 +135,11 @@ class VistTracker {
   // The newest output: all 26 joints at the newest IMU time (inactive before acquisition).
   const HandPose& pose() const noexcept { return output_; }
   TimeNs newest_imu_time_ns() const noexcept { return newest_imu_ns_; }
+  // Capture time of the newest frame whose markers corrected the filter (at
+  // least 3 fused, or an acquisition); 0 before any. Frames that arrive but
+  // whose markers all miss the prediction do not count: the IMUs alone carry
+  // the hand then, and drift.
+  TimeNs last_vision_fix_ns() const noexcept { return last_seen_ns_; }
 
   const VistStats& stats() const noexcept { return stats_; }
   const FrameReport& last_frame() const noexcept { return last_frame_; }

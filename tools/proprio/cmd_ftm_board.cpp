@@ -204,10 +204,8 @@ struct EmulateArgs {
   double interval_s = 1.0;
   int subject = 3;
   std::uint64_t seed = 1;
-  double clock_ppm = 0.0;
-  std::uint32_t start_timestamp_us = 0;
-  double drop = 0.0, duplicate = 0.0, corrupt = 0.0, reorder = 0.0, overrun = 0.0;
-  std::vector<std::string> unplugs;
+  BoardEmulatorFaultArgs link;
+  double overrun = 0.0;
 };
 
 int run_emulate(const EmulateArgs& a) {
@@ -224,18 +222,8 @@ int run_emulate(const EmulateArgs& a) {
 
   FtmEmulatorOptions eo;
   eo.seed = mix_seed(a.seed, 0xf7b0a2d);
-  eo.clock_error_ppm = a.clock_ppm;
-  eo.boot_timestamp_us = a.start_timestamp_us;
-  eo.faults.drop_probability = a.drop;
-  eo.faults.duplicate_probability = a.duplicate;
-  eo.faults.corrupt_probability = a.corrupt;
-  eo.faults.reorder_probability = a.reorder;
+  apply_board_emulator_faults(a.link, eo);
   eo.faults.device_overrun_probability = a.overrun;
-  for (const std::string& u : a.unplugs) {
-    auto at_for = parse_board_unplug(u);
-    if (!at_for) return report_error(at_for.error());
-    eo.faults.unplugs.push_back({at_for->first, at_for->second});
-  }
   if (auto s = eo.validate(); !s) return report_error(s.error());
   auto emulator = FtmBoardEmulator::create(eo, std::move(*wearer));
   if (!emulator) return report_error(emulator.error());
@@ -360,24 +348,9 @@ void add_ftm_board_command(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
       ->capture_default_str();
   emu_cmd->add_option("--seed", emu->seed, "Seed of the wearer and the faults")->capture_default_str();
-  emu_cmd->add_option("--clock-ppm", emu->clock_ppm, "Board crystal error, ppm (a real one is within ±100)")
-      ->check(CLI::Range(-1000.0, 1000.0))
-      ->capture_default_str();
-  emu_cmd->add_option("--start-timestamp-us", emu->start_timestamp_us,
-                      "Board µs counter at power-up; 4294000000 makes it wrap about 1 s in")
-      ->capture_default_str();
-  emu_cmd->add_option("--drop", emu->drop, "Probability that a report is lost")->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--duplicate", emu->duplicate, "Probability that a report is sent twice")
-      ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--corrupt", emu->corrupt, "Probability that a report has one bit flipped")
-      ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--reorder", emu->reorder, "Probability that a report is sent after the next one")
-      ->check(CLI::Range(0.0, 1.0));
+  add_board_emulator_fault_options(*emu_cmd, emu->link, "the board");
   emu_cmd->add_option("--overrun", emu->overrun, "Probability that the board discards a report itself")
       ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--unplug", emu->unplugs,
-                      "AT:FOR in seconds: the board loses power at AT for FOR, then boots again (repeatable)")
-      ->check([](const std::string& s) { return check_board_unplug(s); });
   emu_cmd->callback([emu, &exit_code] { exit_code = run_emulate(*emu); });
 }
 

@@ -262,23 +262,10 @@ struct EmulateArgs {
   std::string protocol = "free-motion";
   std::string hand = "right";
   int rate_hz = 100;
-  double clock_ppm = 0.0;
-  std::uint32_t start_timestamp_us = 0;
-  double drop = 0.0, duplicate = 0.0, corrupt = 0.0, reorder = 0.0, stale = 0.0;
-  std::vector<std::string> unplugs;
+  BoardEmulatorFaultArgs link;
+  double stale = 0.0;
   bool force = false;
 };
-
-std::string check_unplug(const std::string& text) {
-  const auto colon = text.find(':');
-  char* end = nullptr;
-  if (colon == std::string::npos) return "'" + text + "': use AT:FOR, seconds, e.g. 2.5:1";
-  const double at = std::strtod(text.substr(0, colon).c_str(), &end);
-  if (*end != '\0' || !(at >= 0)) return "'" + text + "': AT must be seconds >= 0";
-  const double dur = std::strtod(text.substr(colon + 1).c_str(), &end);
-  if (*end != '\0' || !(dur > 0)) return "'" + text + "': FOR must be seconds > 0";
-  return {};
-}
 
 int run_emulate(const EmulateArgs& a) {
   if (!a.force && std::filesystem::exists(a.out)) {
@@ -302,19 +289,9 @@ int run_emulate(const EmulateArgs& a) {
   ImuGloveEmulatorOptions eo;
   eo.imu_count = static_cast<std::uint8_t>(imu->imu_count());
   eo.rate_hz = static_cast<std::uint16_t>(a.rate_hz);
-  eo.clock_error_ppm = a.clock_ppm;
-  eo.boot_timestamp_us = a.start_timestamp_us;
   eo.seed = mix_seed(a.seed, 3);
-  eo.faults.drop_probability = a.drop;
-  eo.faults.duplicate_probability = a.duplicate;
-  eo.faults.corrupt_probability = a.corrupt;
-  eo.faults.reorder_probability = a.reorder;
+  apply_board_emulator_faults(a.link, eo);
   eo.faults.stale_probability = a.stale;
-  for (const std::string& u : a.unplugs) {
-    const auto colon = u.find(':');
-    eo.faults.unplugs.push_back({seconds_to_ns(std::strtod(u.substr(0, colon).c_str(), nullptr)),
-                                 seconds_to_ns(std::strtod(u.substr(colon + 1).c_str(), nullptr))});
-  }
   auto emulator = ImuGloveEmulator::create(eo);
   if (!emulator) return logger().error("{}", emulator.error().message), 1;
 
@@ -406,24 +383,9 @@ void add_glove_command(CLI::App& app, int& exit_code) {
   emu_cmd->add_option("--rate", emu->rate_hz, "IMU sample rate, Hz")
       ->check(CLI::Range(1, static_cast<int>(kImuGloveMaxRateHz)))
       ->capture_default_str();
-  emu_cmd->add_option("--clock-ppm", emu->clock_ppm, "Device crystal error, ppm (a real one is within ±100)")
-      ->check(CLI::Range(-1000.0, 1000.0))
-      ->capture_default_str();
-  emu_cmd->add_option("--start-timestamp-us", emu->start_timestamp_us,
-                      "Device µs counter at power-up; real firmware starts at 0, 4294000000 makes it wrap about 1 s in")
-      ->capture_default_str();
-  emu_cmd->add_option("--drop", emu->drop, "Probability that a report is lost")->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--duplicate", emu->duplicate, "Probability that a report is sent twice")
-      ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--corrupt", emu->corrupt, "Probability that a report has one bit flipped")
-      ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--reorder", emu->reorder, "Probability that a report is sent after the next one")
-      ->check(CLI::Range(0.0, 1.0));
+  add_board_emulator_fault_options(*emu_cmd, emu->link, "the glove");
   emu_cmd->add_option("--stale", emu->stale, "Probability, per IMU and tick, that a sample repeats the last (stale)")
       ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--unplug", emu->unplugs,
-                      "AT:FOR in seconds: the glove loses power at AT for FOR, then boots again (repeatable)")
-      ->check([](const std::string& s) { return check_unplug(s); });
   emu_cmd->add_flag("--force", emu->force, "Overwrite an existing file");
   emu_cmd->callback([emu, &exit_code] { exit_code = run_emulate(*emu); });
 }

@@ -339,10 +339,8 @@ struct EmulateArgs {
   int top_strips = 13;
   int bottom_strips = 14;
   int rate_hz = kStretchDefaultRateHz;
-  double clock_ppm = 0.0;
-  std::uint32_t start_timestamp_us = 0;
-  double drop = 0.0, duplicate = 0.0, corrupt = 0.0, reorder = 0.0, saturate = 0.0, overrun = 0.0;
-  std::vector<std::string> unplugs;
+  BoardEmulatorFaultArgs link;
+  double saturate = 0.0, overrun = 0.0;
 };
 
 // Slowly varying synthetic capacitances: each combination its own level (a
@@ -366,19 +364,10 @@ StretchEmulatorOptions emulator_options(const EmulateArgs& a) {
   eo.top_strips = static_cast<std::uint8_t>(a.top_strips);
   eo.bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
   eo.rate_hz = static_cast<std::uint16_t>(a.rate_hz);
-  eo.clock_error_ppm = a.clock_ppm;
-  eo.boot_timestamp_us = a.start_timestamp_us;
   eo.seed = a.seed;
-  eo.faults.drop_probability = a.drop;
-  eo.faults.duplicate_probability = a.duplicate;
-  eo.faults.corrupt_probability = a.corrupt;
-  eo.faults.reorder_probability = a.reorder;
+  apply_board_emulator_faults(a.link, eo);
   eo.faults.saturate_probability = a.saturate;
   eo.faults.device_overrun_probability = a.overrun;
-  for (const std::string& u : a.unplugs) {
-    // Checked by the option already (check_board_unplug).
-    if (auto at_for = parse_board_unplug(u)) eo.faults.unplugs.push_back({at_for->first, at_for->second});
-  }
   return eo;
 }
 
@@ -569,27 +558,12 @@ void add_stretch_board_command(CLI::App& app, int& exit_code) {
   emu_cmd->add_option("--rate", emu->rate_hz, "Measurements per second")
       ->check(CLI::Range(1, static_cast<int>(kStretchMaxRateHz)))
       ->capture_default_str();
-  emu_cmd->add_option("--clock-ppm", emu->clock_ppm, "Board crystal error, ppm (a real one is within ±100)")
-      ->check(CLI::Range(-1000.0, 1000.0))
-      ->capture_default_str();
-  emu_cmd->add_option("--start-timestamp-us", emu->start_timestamp_us,
-                      "Board µs counter at power-up; real firmware starts at 0, 4294000000 makes it wrap about 1 s in")
-      ->capture_default_str();
-  emu_cmd->add_option("--drop", emu->drop, "Probability that a report is lost")->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--duplicate", emu->duplicate, "Probability that a report is sent twice")
-      ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--corrupt", emu->corrupt, "Probability that a report has one bit flipped")
-      ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--reorder", emu->reorder, "Probability that a report is sent after the next one")
-      ->check(CLI::Range(0.0, 1.0));
+  add_board_emulator_fault_options(*emu_cmd, emu->link, "the board");
   emu_cmd->add_option("--saturate", emu->saturate, "Probability, per measurement, of a saturated reading")
       ->check(CLI::Range(0.0, 1.0));
   emu_cmd->add_option("--overrun", emu->overrun,
                       "Probability that the board discards a report itself (transmit queue full)")
       ->check(CLI::Range(0.0, 1.0));
-  emu_cmd->add_option("--unplug", emu->unplugs,
-                      "AT:FOR in seconds: the board loses power at AT for FOR, then boots again (repeatable)")
-      ->check([](const std::string& s) { return check_board_unplug(s); });
   emu_cmd->add_option("--out", emu->out, "Write the reports to this capture file instead of running the self-test");
   emu_cmd->add_flag("--force", emu->force, "Overwrite an existing --out file");
   emu_cmd->callback([emu, &exit_code] { exit_code = run_emulate(*emu); });

@@ -78,6 +78,25 @@ Result<std::pair<TimeNs, DurationNs>> parse_board_unplug(const std::string& text
                                        seconds_to_ns(std::strtod(text.substr(colon + 1).c_str(), nullptr))};
 }
 
+void add_board_emulator_fault_options(CLI::App& emulate, BoardEmulatorFaultArgs& args, const std::string& device) {
+  emulate.add_option("--clock-ppm", args.clock_ppm, "Device crystal error, ppm (a real one is within ±100)")
+      ->check(CLI::Range(-1000.0, 1000.0))
+      ->capture_default_str();
+  emulate.add_option("--start-timestamp-us", args.start_timestamp_us,
+                     "Device µs counter at power-up; real firmware starts at 0, 4294000000 makes it wrap about 1 s in")
+      ->capture_default_str();
+  emulate.add_option("--drop", args.drop, "Probability that a report is lost")->check(CLI::Range(0.0, 1.0));
+  emulate.add_option("--duplicate", args.duplicate, "Probability that a report is sent twice")
+      ->check(CLI::Range(0.0, 1.0));
+  emulate.add_option("--corrupt", args.corrupt, "Probability that a report has one bit flipped")
+      ->check(CLI::Range(0.0, 1.0));
+  emulate.add_option("--reorder", args.reorder, "Probability that a report is sent after the next one")
+      ->check(CLI::Range(0.0, 1.0));
+  emulate.add_option("--unplug", args.unplugs,
+                     "AT:FOR in seconds: " + device + " loses power at AT for FOR, then boots again (repeatable)")
+      ->check([](const std::string& s) { return check_board_unplug(s); });
+}
+
 void print_link_state(hid::LinkState state, std::string_view detail) {
   // On the reader thread; one printf and a flush per change.
   std::printf("[%s] %.*s\n", hid::to_string(state), static_cast<int>(detail.size()), detail.data());

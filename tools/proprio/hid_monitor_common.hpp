@@ -6,6 +6,7 @@
 #include <string>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 #include "commands.hpp"
 #include "proprio/core/time.hpp"
@@ -45,6 +46,32 @@ void add_hid_monitor_options(CLI::App& monitor, HidMonitorArgs& args, const std:
 // acceptable, else why not) and the parsed (at, duration) in nanoseconds.
 std::string check_board_unplug(const std::string& text);
 Result<std::pair<TimeNs, DurationNs>> parse_board_unplug(const std::string& text);
+
+// The link faults and clock every board emulator takes (`emulate` subcommands).
+struct BoardEmulatorFaultArgs {
+  double clock_ppm = 0.0;
+  std::uint32_t start_timestamp_us = 0;
+  double drop = 0.0, duplicate = 0.0, corrupt = 0.0, reorder = 0.0;
+  std::vector<std::string> unplugs;  // AT:FOR, checked by check_board_unplug
+};
+
+// Adds --clock-ppm, --start-timestamp-us, --drop, --duplicate, --corrupt,
+// --reorder and --unplug; `device` names what loses power ("the board").
+void add_board_emulator_fault_options(CLI::App& emulate, BoardEmulatorFaultArgs& args, const std::string& device);
+
+// Copies them into an emulator's options (clock_error_ppm, boot_timestamp_us, faults).
+template <typename EmulatorOptions>
+void apply_board_emulator_faults(const BoardEmulatorFaultArgs& a, EmulatorOptions& eo) {
+  eo.clock_error_ppm = a.clock_ppm;
+  eo.boot_timestamp_us = a.start_timestamp_us;
+  eo.faults.drop_probability = a.drop;
+  eo.faults.duplicate_probability = a.duplicate;
+  eo.faults.corrupt_probability = a.corrupt;
+  eo.faults.reorder_probability = a.reorder;
+  for (const std::string& u : a.unplugs) {
+    if (auto at_for = parse_board_unplug(u)) eo.faults.unplugs.push_back({at_for->first, at_for->second});
+  }
+}
 
 // Prints a board link's state changes ("[streaming] /dev/hidraw3"); for
 // set_state_callback, on the reader thread.

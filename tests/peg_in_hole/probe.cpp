@@ -14,6 +14,10 @@
 // PAIRED=N TRIALS=T SETS=1,2,3,4 PBASE=b: N participants, each familiarised
 // once, then T trials in each setting from a copy of that participant (the
 // settings differ by nothing else); WHY=1 counts breaks and drops by phase.
+// TRACKER=ftm (PAIRED only): a fresh simulated FTM glove per arm (the study's
+// glove seed); ABLATE=none,truth,truth_wrist,... (DIAGNOSTIC,
+// FtmGloveAblation; "ideal" = no glove) makes each variant an arm; FAMFTM=1
+// familiarises through a glove as the study does.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -28,7 +32,7 @@ using namespace proprio::peg_in_hole;
 // published (180 + 180 s) unless FAM is set.
 static SimulatedUser familiarised_participant(const PegInHoleConfig& c, const HandModel& hand,
                                               const std::shared_ptr<const haptics::FingertipDeviceModel>& dev,
-                                              std::uint64_t pseed) {
+                                              std::uint64_t pseed, SimulatedFtmGlove* glove = nullptr) {
   SimulatedUser pu(c, hand, mix_seed(pseed, 0x55534552));
   const double fam_s = getenv("FAM") ? atof(getenv("FAM")) : 180.0;
   for (WorldPhase phase : {WorldPhase::spring, WorldPhase::ground}) {
@@ -36,10 +40,27 @@ static SimulatedUser familiarised_participant(const PegInHoleConfig& c, const Ha
     SimulatedTrialOptions fo;
     fo.phase = phase;
     fo.time_limit_s = fam_s;
+    fo.ftm_glove = glove;
     (void)run_simulated_trial(c, trial_layout(c, pseed, -1), Setting{true, true}, pu, hand, dev, fo);
     pu.set_grasp_only(false);
   }
   return pu;
+}
+
+// "a,b,c" -> {"a", "b", "c"}.
+static std::vector<std::string> names_list(const char* text) {
+  std::vector<std::string> out;
+  std::string cur;
+  for (const char* q = text; q && *q; ++q) {
+    if (*q == ',') {
+      if (!cur.empty()) out.push_back(cur);
+      cur.clear();
+    } else {
+      cur += *q;
+    }
+  }
+  if (!cur.empty()) out.push_back(cur);
+  return out;
 }
 
 // "1,4,2" -> {1, 4, 2}, settings outside 1-4 dropped.
@@ -137,51 +158,113 @@ int main(int argc, char** argv) {
     // each familiarised once, then T trials in every setting, each setting
     // from a copy of the same familiarised user on the same layouts, so the
     // settings differ only by the setting.
+    // TRACKER=ftm: each arm wears a fresh simulated FTM glove (the study's
+    // glove seed for that participant). ABLATE=none,truth_wrist,...
+    // (DIAGNOSTIC, FtmGloveAblation; "ideal" = no glove): every listed
+    // variant is an arm of its own, per setting, from the same copy.
+    // FAMFTM=1 familiarises through a glove too, as the study does.
     const int n = atoi(pn), trials = getenv("TRIALS") ? atoi(getenv("TRIALS")) : 5;
     const std::uint64_t base = getenv("PBASE") ? std::strtoull(getenv("PBASE"), nullptr, 10) : 100;
     const std::vector<int> sets = settings_list(getenv("SETS") ? getenv("SETS") : "1,2,3,4");
-    std::vector<double> sum_t(5, 0.0), sum_norm(5, 0.0);
-    std::vector<int> sum_d(5, 0), sum_b(5, 0), sum_to(5, 0);
-    std::vector<std::map<std::string, int>> tally(5);
+    const bool ftm = getenv("TRACKER") && std::string(getenv("TRACKER")) == "ftm";
+    std::vector<std::string> variants = {"ideal"};
+    if (ftm) variants = names_list(getenv("ABLATE") ? getenv("ABLATE") : "none");
+    struct Arm {
+      int setting;
+      std::string variant;
+      double sum_t = 0.0, sum_norm = 0.0, err_deg = 0.0, wrist_mm = 0.0, wrist_deg = 0.0;
+      int breaks = 0, drops = 0, timeouts = 0, done = 0, runs = 0;
+      std::map<std::string, int> tally;
+    };
+    std::vector<Arm> arms;
+    for (int st : sets) {
+      for (const std::string& v : variants) {
+        if (v != "ideal" && !parse_ftm_glove_ablation(v)) {
+          std::printf("%s\n", parse_ftm_glove_ablation(v).error().message.c_str());
+          return 1;
+        }
+        Arm arm;
+        arm.setting = st;
+        arm.variant = v;
+        arms.push_back(std::move(arm));
+      }
+    }
+    const auto make_glove = [&](std::uint64_t pseed, FtmGloveAblation a) {
+      SimulatedFtmGloveOptions go;
+      go.seed = mix_seed(pseed, 0x46544d);  // as the study runner seeds it
+      go.device_leads = c.ftm_device_leads;
+      go.ablate = a;
+      return SimulatedFtmGlove::create(*shape, go);
+    };
     for (int i = 0; i < n; ++i) {
       const std::uint64_t pseed = base + static_cast<std::uint64_t>(i);
-      const SimulatedUser pu = familiarised_participant(c, hand, *dev, pseed);
-      std::vector<double> mean_t(5, 0.0);
-      for (int st : sets) {
+      std::unique_ptr<SimulatedFtmGlove> fam_glove;
+      if (getenv("FAMFTM")) {
+        auto g = make_glove(pseed, FtmGloveAblation::none);
+        if (!g) { std::printf("%s\n", g.error().message.c_str()); return 1; }
+        fam_glove = std::move(*g);
+      }
+      const SimulatedUser pu = familiarised_participant(c, hand, *dev, pseed, fam_glove.get());
+      std::vector<double> mean_t(arms.size(), 0.0);
+      for (std::size_t ai = 0; ai < arms.size(); ++ai) {
+        Arm& arm = arms[ai];
         SimulatedUser u = pu;
-        std::printf("p%llu S%d:", static_cast<unsigned long long>(pseed), st);
+        std::unique_ptr<SimulatedFtmGlove> glove;
+        if (arm.variant != "ideal") {
+          auto g = make_glove(pseed, *parse_ftm_glove_ablation(arm.variant));
+          if (!g) { std::printf("%s\n", g.error().message.c_str()); return 1; }
+          glove = std::move(*g);
+          if (getenv("DESCRIBE")) std::printf("%s\n", glove->describe().c_str());
+        }
+        std::printf("p%llu S%d %-20s:", static_cast<unsigned long long>(pseed), arm.setting, arm.variant.c_str());
         for (int k = 0; k < trials; ++k) {
           SimulatedTrialOptions to;
           to.time_limit_s = 120;
+          to.ftm_glove = glove.get();
           if (getenv("WHY")) {
-            to.on_event = [&tally, st](PegEvent::Kind kind, std::string_view phase) {
-              if (kind == PegEvent::Kind::broke) ++tally[st]["b:" + std::string(phase)];
-              if (kind == PegEvent::Kind::dropped) ++tally[st]["d:" + std::string(phase)];
+            to.on_event = [&arm](PegEvent::Kind kind, std::string_view phase) {
+              if (kind == PegEvent::Kind::broke) ++arm.tally["b:" + std::string(phase)];
+              if (kind == PegEvent::Kind::dropped) ++arm.tally["d:" + std::string(phase)];
             };
           }
-          auto r = run_simulated_trial(c, trial_layout(c, pseed, k), setting_from_number(st), u, hand, *dev, to);
-          if (!r) return 1;
+          auto r = run_simulated_trial(c, trial_layout(c, pseed, k), setting_from_number(arm.setting), u, hand, *dev, to);
+          if (!r) { std::printf("%s\n", r.error().message.c_str()); return 1; }
           std::printf(" %5.1f/%db%dd", r->completion_time_s, r->breaks, r->drops);
-          mean_t[st] += r->completion_time_s / trials;
-          sum_d[st] += r->drops;
-          sum_b[st] += r->breaks;
-          sum_to[st] += r->completed ? 0 : 1;
+          if (r->ftm) {
+            const auto& rv = r->ftm->mean_wrist_rotation_error_in_wrist_deg;
+            std::printf("(%.1f°,%.1fmm,%.1f°[%.0f %.0f %.0f])", r->ftm->mean_angle_error_deg, r->ftm->mean_wrist_error_mm,
+                        r->ftm->mean_wrist_angle_error_deg, rv[0], rv[1], rv[2]);
+            arm.err_deg += r->ftm->mean_angle_error_deg;
+            arm.wrist_mm += r->ftm->mean_wrist_error_mm;
+            arm.wrist_deg += r->ftm->mean_wrist_angle_error_deg;
+          }
+          std::fflush(stdout);
+          mean_t[ai] += r->completion_time_s / trials;
+          arm.drops += r->drops;
+          arm.breaks += r->breaks;
+          arm.timeouts += r->completed ? 0 : 1;
+          arm.done += r->completed ? 1 : 0;
+          ++arm.runs;
         }
-        std::printf("  mean %.1f\n", mean_t[st]);
+        std::printf("  mean %.1f\n", mean_t[ai]);
         std::fflush(stdout);
       }
       double all = 0.0;
-      for (int st : sets) all += mean_t[st] / static_cast<double>(sets.size());
-      for (int st : sets) {
-        sum_t[st] += mean_t[st] / n;
-        sum_norm[st] += mean_t[st] / all / n;
+      for (double m : mean_t) all += m / static_cast<double>(arms.size());
+      for (std::size_t ai = 0; ai < arms.size(); ++ai) {
+        arms[ai].sum_t += mean_t[ai] / n;
+        arms[ai].sum_norm += mean_t[ai] / all / n;
       }
     }
-    for (int st : sets)
-    {
-      std::printf("S%d: mean %.1f s, normalised %.2f, breaks %d, drops %d, timeouts %d", st, sum_t[st], sum_norm[st],
-                  sum_b[st], sum_d[st], sum_to[st]);
-      for (const auto& [k, v] : tally[st]) std::printf(" %s=%d", k.c_str(), v);
+    for (const Arm& arm : arms) {
+      std::printf("S%d %-20s: n %d, completed %d, mean %.1f s, normalised %.2f, breaks %d, drops %d, timeouts %d",
+                  arm.setting, arm.variant.c_str(), arm.runs, arm.done, arm.sum_t, arm.sum_norm, arm.breaks, arm.drops,
+                  arm.timeouts);
+      if (arm.variant != "ideal" && arm.runs > 0) {
+        std::printf(", tracker err %.1f°, wrist %.1f mm %.1f°", arm.err_deg / arm.runs, arm.wrist_mm / arm.runs,
+                    arm.wrist_deg / arm.runs);
+      }
+      for (const auto& [k, v] : arm.tally) std::printf(" %s=%d", k.c_str(), v);
       std::printf("\n");
     }
     return 0;

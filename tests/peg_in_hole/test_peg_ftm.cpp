@@ -199,3 +199,46 @@ TEST(PegFtm, DrivenWearerIsWhatItWasDrivenWith) {
   (*q)->drive((*q)->task_begin_ns(), b.T_world_wrist, b.angles);
   EXPECT_EQ((*q)->truth_at((*q)->task_begin_ns() + seconds_to_ns(1.5)).angles[aa], before);
 }
+
+// The diagnostic ablation (FtmGloveAblation) replaces exactly its part of the
+// tracked hand by the true one and leaves the rest the tracker's.
+TEST(PegFtm, AblationReplacesOnlyItsPartOfTheTrackedHand) {
+  for (int k = 0; k <= static_cast<int>(FtmGloveAblation::true_mountings); ++k) {
+    const auto a = static_cast<FtmGloveAblation>(k);
+    auto back = parse_ftm_glove_ablation(to_string(a));
+    ASSERT_TRUE(back.ok()) << to_string(a);
+    EXPECT_EQ(*back, a);
+  }
+  auto bad = parse_ftm_glove_ablation("truth_everything");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("truth_everything"), std::string::npos) << bad.error().message;
+
+  auto shape = simulated_participant_hand(SimUserOptions{});
+  ASSERT_TRUE(shape.ok());
+  const HandCommand truth = pegftm_still_hand(0.22);
+  const auto run = [&](FtmGloveAblation a) {
+    SimulatedFtmGloveOptions o;
+    o.seed = 5;
+    o.ablate = a;
+    auto g = SimulatedFtmGlove::create(*shape, o);
+    EXPECT_TRUE(g.ok()) << (g.ok() ? "" : g.error().message);
+    EXPECT_NE((*g)->describe().find(to_string(a)), std::string::npos) << (*g)->describe();
+    return pegftm_run(**g, truth, true, 1.0, 0.0);
+  };
+  const auto max_angle_diff = [](const HandAngles& x, const HandAngles& y) {
+    double m = 0.0;
+    for (std::size_t i = 0; i < kHandDofCount; ++i) m = std::max(m, std::abs(x[i] - y[i]));
+    return m;
+  };
+  // The hand is still, so the true (smoothed) hand is the command itself.
+  const auto wrist = run(FtmGloveAblation::truth_wrist);
+  EXPECT_LT((wrist.first.T_world_wrist.p - truth.T_world_wrist.p).norm(), 1e-9);
+  EXPECT_LT(wrist.first.T_world_wrist.q.angularDistance(truth.T_world_wrist.q), 1e-9);
+  EXPECT_GT(max_angle_diff(wrist.first.angles, truth.angles), 1e-4);  // the tracker's angles
+  // The figures still describe the tracker, not what the world got.
+  EXPECT_GT(wrist.second.mean_wrist_angle_error_deg, 0.0);
+
+  const auto angles = run(FtmGloveAblation::truth_angles);
+  EXPECT_LT(max_angle_diff(angles.first.angles, truth.angles), 1e-12);
+  EXPECT_GT(angles.first.T_world_wrist.q.angularDistance(truth.T_world_wrist.q), 1e-4);  // the tracker's wrist
+}

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <optional>
 #include <vector>
 
@@ -28,24 +29,69 @@ constexpr double kCurrentStepA = 0.002;
 // delay), so its acceleration stays physical.
 constexpr double kHandSmoothingHz = 25.0;
 constexpr std::array<Finger, 3> kDeviceFingers = {Finger::thumb, Finger::index, Finger::middle};
+// FtmGloveAblation::truth_delayed_30ms, in world ticks (1 ms).
+constexpr std::size_t kAblationDelayTicks = 30;
+
+constexpr std::array<std::pair<FtmGloveAblation, const char*>, 12> kAblationNames = {{
+    {FtmGloveAblation::none, "none"},
+    {FtmGloveAblation::truth, "truth"},
+    {FtmGloveAblation::truth_angles, "truth_angles"},
+    {FtmGloveAblation::truth_wrist, "truth_wrist"},
+    {FtmGloveAblation::truth_wrist_position, "truth_wrist_position"},
+    {FtmGloveAblation::truth_wrist_rotation, "truth_wrist_rotation"},
+    {FtmGloveAblation::truth_thumb, "truth_thumb"},
+    {FtmGloveAblation::truth_index_middle, "truth_index_middle"},
+    {FtmGloveAblation::truth_ring_little, "truth_ring_little"},
+    {FtmGloveAblation::truth_distal, "truth_distal"},
+    {FtmGloveAblation::truth_delayed_30ms, "truth_delayed_30ms"},
+    {FtmGloveAblation::true_mountings, "true_mountings"},
+}};
+
+void copy_finger_angles(HandAngles& to, const HandAngles& from, Finger f) {
+  for (std::size_t i = first_dof_of(f); i < first_dof_of(f) + 4; ++i) to[i] = from[i];
+}
 }  // namespace
+
+const char* to_string(FtmGloveAblation a) noexcept {
+  for (const auto& [v, name] : kAblationNames) {
+    if (v == a) return name;
+  }
+  return "?";
+}
+
+Result<FtmGloveAblation> parse_ftm_glove_ablation(std::string_view name) {
+  std::string all;
+  for (const auto& [v, n] : kAblationNames) {
+    if (name == n) return v;
+    all += all.empty() ? n : fmt::format(", {}", n);
+  }
+  return make_error(Errc::invalid_argument, fmt::format("FTM glove ablation '{}': use one of {}", name, all));
+}
 
 Status SimulatedFtmGloveOptions::validate() const {
   if (!std::isfinite(between_trials_s) || between_trials_s < 0.1 || between_trials_s > 10.0) {
     return make_error(Errc::invalid_argument,
                       fmt::format("SimulatedFtmGloveOptions.between_trials_s = {}: use 0.1-10 s", between_trials_s));
   }
+  if (std::string_view(to_string(ablate)) == "?") {
+    return make_error(Errc::invalid_argument, fmt::format("SimulatedFtmGloveOptions.ablate = {}: not a FtmGloveAblation",
+                                                          static_cast<int>(ablate)));
+  }
   return Status::success();
 }
 
 std::string SimulatedFtmGloveOptions::describe() const {
-  return fmt::format("simulated FTM glove: seed {}, {:.1f} s back to rest between trials, device leads {}", seed,
-                     between_trials_s, device_leads ? "on" : "off");
+  return fmt::format("simulated FTM glove: seed {}, {:.1f} s back to rest between trials, device leads {}{}", seed,
+                     between_trials_s, device_leads ? "on" : "off",
+                     ablate == FtmGloveAblation::none
+                         ? ""
+                         : fmt::format(", DIAGNOSTIC ablation {} (not the FTM as simulated)", to_string(ablate)));
 }
 
 struct SimulatedFtmGlove::Impl {
   SimulatedFtmGloveOptions options;
   std::unique_ptr<ftm_sim::FtmWearerSimulator> wearer;
+  std::string calibration_text;  // what the glove's calibration found (describe())
   // Both trackers see every sample, so switching "without AA" between
   // trials never starts a filter from scratch.
   std::optional<ftm::FtmTracker> with_aa, without_aa;
@@ -77,8 +123,45 @@ struct SimulatedFtmGlove::Impl {
   // Trial accumulators.
   FtmTrialFigures figures;
   std::array<std::uint64_t, kFtmCompassCount> compass_samples{}, compass_flagged{}, truth_disturbed{};
-  double angle_err_sum = 0.0, wrist_err_sum = 0.0;
+  double angle_err_sum = 0.0, wrist_err_sum = 0.0, wrist_angle_err_sum = 0.0;
+  Vec3 wrist_rotvec_sum = Vec3::Zero();
   std::uint64_t err_samples = 0;
+  // The true hand's last kAblationDelayTicks + 1 ticks (truth_delayed_30ms only).
+  std::deque<HandCommand> hand_history;
+
+  // The diagnostic override (FtmGloveAblation) of the tracked hand `out`.
+  HandCommand ablated(const HandCommand& out, const HandCommand& hand) {
+    HandCommand a = out;
+    switch (options.ablate) {
+      case FtmGloveAblation::none:
+      case FtmGloveAblation::true_mountings: break;  // applied to the calibration (create())
+      case FtmGloveAblation::truth: a = hand; break;
+      case FtmGloveAblation::truth_angles: a.angles = hand.angles; break;
+      case FtmGloveAblation::truth_wrist: a.T_world_wrist = hand.T_world_wrist; break;
+      case FtmGloveAblation::truth_wrist_position: a.T_world_wrist.p = hand.T_world_wrist.p; break;
+      case FtmGloveAblation::truth_wrist_rotation: a.T_world_wrist.q = hand.T_world_wrist.q; break;
+      case FtmGloveAblation::truth_thumb: copy_finger_angles(a.angles, hand.angles, Finger::thumb); break;
+      case FtmGloveAblation::truth_index_middle:
+        copy_finger_angles(a.angles, hand.angles, Finger::index);
+        copy_finger_angles(a.angles, hand.angles, Finger::middle);
+        break;
+      case FtmGloveAblation::truth_ring_little:
+        copy_finger_angles(a.angles, hand.angles, Finger::ring);
+        copy_finger_angles(a.angles, hand.angles, Finger::little);
+        break;
+      case FtmGloveAblation::truth_distal:
+        for (Finger f : {Finger::thumb, Finger::index, Finger::middle, Finger::ring, Finger::little}) {
+          a.angles[first_dof_of(f) + 3] = hand.angles[first_dof_of(f) + 3];
+        }
+        break;
+      case FtmGloveAblation::truth_delayed_30ms:
+        hand_history.push_back(hand);
+        while (hand_history.size() > kAblationDelayTicks + 1) hand_history.pop_front();
+        a = hand_history.front();
+        break;
+    }
+    return a;
+  }
 
   void feed_until(TimeNs t) {
     events.clear();
@@ -132,12 +215,32 @@ Result<std::unique_ptr<SimulatedFtmGlove>> SimulatedFtmGlove::create(const HandS
   impl->wearer = std::move(*wearer);
   auto cal = ftm_sim::calibrate_from_wearer(*impl->wearer);
   if (!cal) return cal.error().with_context("calibrating the simulated FTM wearer");
+  if (options.ablate == FtmGloveAblation::true_mountings) {
+    const auto mounts = impl->wearer->imus().mountings();
+    for (std::size_t i = 0; i < ftm::kFtmImuCount && i < mounts.size(); ++i) {
+      cal->outcome.calibration.q_imu_segment[i] = mounts[i].T_segment_imu.q.conjugate();
+    }
+  }
   ftm::FtmTrackerOptions to;
   auto a = ftm::FtmTracker::create(to, cal->outcome.calibration);
   if (!a) return a.error();
   to.track_abduction = false;
   auto b = ftm::FtmTracker::create(to, cal->outcome.calibration);
   if (!b) return b.error();
+  impl->calibration_text = cal->outcome.calibration.describe();
+  // The calibration's mounting error per IMU against the simulator's true
+  // mounting (q_imu_segment is the segment's frame in the IMU's): the
+  // dorsum's error tilts the whole tracked hand.
+  {
+    const auto mounts = impl->wearer->imus().mountings();
+    for (std::size_t i = 0; i < ftm::kFtmImuCount && i < mounts.size(); ++i) {
+      const Quat q_true = mounts[i].T_segment_imu.q.conjugate();
+      impl->calibration_text += fmt::format(
+          "; IMU {} mount error {:.1f} deg (true misalignment {:.1f} deg)", i,
+          rad_to_deg(cal->outcome.calibration.q_imu_segment[i].angularDistance(q_true)),
+          rad_to_deg(mounts[i].misalignment_rad));
+    }
+  }
   impl->with_aa.emplace(std::move(*a));
   impl->without_aa.emplace(std::move(*b));
   for (const ftm::FtmEvent& e : cal->events) {
@@ -175,11 +278,13 @@ Status SimulatedFtmGlove::begin_trial(const HandCommand& first, bool track_abduc
   }
   m.offset_ns = end;
   m.last = first;
+  m.hand_history.clear();
   m.figures = {};
   m.compass_samples = {};
   m.compass_flagged = {};
   m.truth_disturbed = {};
-  m.angle_err_sum = m.wrist_err_sum = 0.0;
+  m.angle_err_sum = m.wrist_err_sum = m.wrist_angle_err_sum = 0.0;
+  m.wrist_rotvec_sum = Vec3::Zero();
   m.err_samples = 0;
   return Status::success();
 }
@@ -215,9 +320,12 @@ HandCommand SimulatedFtmGlove::track(TimeNs world_t_ns, const HandCommand& truth
     }
     if (n > 0) m.angle_err_sum += rad_to_deg(sum / n);
     m.wrist_err_sum += 1e3 * (out.T_world_wrist.p - hand.T_world_wrist.p).norm();
+    m.wrist_angle_err_sum += rad_to_deg(out.T_world_wrist.q.angularDistance(hand.T_world_wrist.q));
+    const Eigen::AngleAxisd e((hand.T_world_wrist.q.conjugate() * out.T_world_wrist.q).normalized());
+    m.wrist_rotvec_sum += e.angle() * e.axis();
     ++m.err_samples;
   }
-  return out;
+  return m.ablated(out, hand);
 }
 
 void SimulatedFtmGlove::set_device_currents(TimeNs world_t_ns, const std::array<double, kFingerCount>& current_a) {
@@ -245,10 +353,17 @@ FtmTrialFigures SimulatedFtmGlove::end_trial() {
   if (m.err_samples) {
     f.mean_angle_error_deg = m.angle_err_sum / static_cast<double>(m.err_samples);
     f.mean_wrist_error_mm = m.wrist_err_sum / static_cast<double>(m.err_samples);
+    f.mean_wrist_angle_error_deg = m.wrist_angle_err_sum / static_cast<double>(m.err_samples);
+    for (int k = 0; k < 3; ++k) {
+      f.mean_wrist_rotation_error_in_wrist_deg[static_cast<std::size_t>(k)] =
+          rad_to_deg(m.wrist_rotvec_sum[k]) / static_cast<double>(m.err_samples);
+    }
   }
   return f;
 }
 
-std::string SimulatedFtmGlove::describe() const { return impl_->options.describe() + " | " + impl_->wearer->describe(); }
+std::string SimulatedFtmGlove::describe() const {
+  return impl_->options.describe() + " | " + impl_->wearer->describe() + " | " + impl_->calibration_text;
+}
 
 }  // namespace proprio::peg_in_hole

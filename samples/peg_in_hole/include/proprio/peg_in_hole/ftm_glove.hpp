@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/result.hpp"
@@ -46,8 +47,35 @@ struct FtmTrialFigures {
   // DOFs (deg) and mean wrist position error (mm).
   double mean_angle_error_deg = 0.0;
   double mean_wrist_error_mm = 0.0;
+  // Mean wrist orientation error (deg), tracked against true; not a CSV column.
+  double mean_wrist_angle_error_deg = 0.0;
+  // Mean of the wrist orientation error as a rotation vector in the true
+  // wrist frame (x, y, z; deg): a steady offset shows here, noise averages out.
+  std::array<double, 3> mean_wrist_rotation_error_in_wrist_deg{};
   std::uint64_t samples = 0;  // truth samples (one per 5 ms)
 };
+
+// DIAGNOSTIC ONLY (why trials fail with the FTM; docs/peg-in-hole.md): replace
+// one part of the tracked hand the world gets by the participant's true
+// (smoothed) hand, or the whole of it by the true hand delayed. The tracker
+// still runs and the error figures still describe its own estimate; a study
+// run with anything but `none` does not simulate the FTM.
+enum class FtmGloveAblation : std::uint8_t {
+  none,                  // the tracker's estimate (the FTM as simulated)
+  truth,                 // the true hand (everything replaced: the wiring's control)
+  truth_angles,          // all 20 angles true, the tracker's wrist
+  truth_wrist,           // the true wrist pose, the tracker's angles
+  truth_wrist_position,  // the true wrist position, the tracker's wrist orientation
+  truth_wrist_rotation,  // the true wrist orientation, the tracker's wrist position
+  truth_thumb,           // the thumb's four angles true
+  truth_index_middle,    // index and middle's eight angles true
+  truth_ring_little,     // ring and little's eight angles true
+  truth_distal,          // the thumb IP and the four DIPs true
+  truth_delayed_30ms,    // the true hand 30 ms late (the tracker's lag alone)
+  true_mountings,        // the tracker's estimate, its calibration's IMU mountings replaced by the true ones
+};
+const char* to_string(FtmGloveAblation a) noexcept;
+Result<FtmGloveAblation> parse_ftm_glove_ablation(std::string_view name);
 
 struct SimulatedFtmGloveOptions {
   std::uint64_t seed = 1;
@@ -56,6 +84,7 @@ struct SimulatedFtmGloveOptions {
   // (ftm_sim::FtmMagneticOptions::enable_device_leads): the dipoles alone
   // give ~0.01 µT at the compasses, the leads ~1 µT (docs/peg-in-hole.md).
   bool device_leads = true;
+  FtmGloveAblation ablate = FtmGloveAblation::none;  // DIAGNOSTIC ONLY (see the enum)
   Status validate() const;
   std::string describe() const;
 };

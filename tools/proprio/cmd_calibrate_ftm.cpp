@@ -1,4 +1,4 @@
-// proprio calibrate ftm: the FTM glove's per-user calibration (Jang 2019,
+// proprio calibrate ftm: the FTM glove's per-user calibration (Lee 2021,
 // §3.2.3; issue 27), guided on stdout: a figure-eight for the compasses (with
 // a coverage indicator), then the three known poses, each taken once the hand
 // has moved into it and held still. The solve is the library's

@@ -1,5 +1,5 @@
 #pragma once
-// Per-user calibration of the FTM glove (Jang 2019, §3.2.3; issue 27):
+// Per-user calibration of the FTM glove (Lee 2021, §3.2.3; issue 27):
 //  * the IMU mountings R_b_f (each hand segment's frame in its IMU's frame),
 //    from three known poses: R_s_f is known from the pose, R_s_b measured, so
 //    R_b_f = R_s_bᵀ R_s_f; over three poses the chordal least-squares mean;

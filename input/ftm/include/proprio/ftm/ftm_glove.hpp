@@ -1,5 +1,5 @@
 #pragma once
-// The FTM glove as data (Jang 2019, ch. 3, §3.2.1): which sensors it has, where
+// The FTM glove as data (Lee 2021, ch. 3, §3.2.1): which sensors it has, where
 // they sit, and the samples its read-out board, its simulator and its tracker
 // exchange. Everything that produces FTM data (the simulated wearer, the board
 // emulator, a live board) delivers these structs; everything that consumes it

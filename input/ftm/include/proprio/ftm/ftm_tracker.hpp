@@ -1,5 +1,5 @@
 #pragma once
-// The FTM glove's tracker (Jang 2019, §3.2.2; issue 27): four Mahony filters
+// The FTM glove's tracker (Lee 2021, §3.2.2; issue 27): four Mahony filters
 // (one per IMU), the thesis's kinematics for the relative rotations, the bend
 // sensors for the 1-DOF joints, synergies for the distal ones and HandModel's
 // forward kinematics to the 26 XR joints.

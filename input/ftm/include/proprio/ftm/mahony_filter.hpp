@@ -2,7 +2,7 @@
 // Mahony's explicit complementary filter on SO(3) with gyro-bias estimation
 // (Mahony, Hamel & Pflimlin, "Nonlinear complementary filters on the special
 // orthogonal group", IEEE TAC 53(5), 2008, eqs. 32 and 47), the attitude
-// filter of the FTM thesis (Jang 2019, §3.2.2), one per IMU:
+// filter of the FTM thesis (Lee 2021, §3.2.2), one per IMU:
 //
 //   ω_mes = Σ k_i (v_i × v̂_i),   v̂_i = R̂ᵀ v0_i            (vector measurements)
 //   Ṙ̂    = R̂ (Ω_y - b̂ + ω_mes)×                           (integrated by the exponential map)

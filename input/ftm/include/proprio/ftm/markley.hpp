@@ -2,7 +2,7 @@
 // Attitude from two vector observations: Wahba's problem solved by the SVD
 // (Markley, "Attitude determination using vector observations and the
 // singular value decomposition", J. Astronaut. Sci. 36(3), 1988). The FTM
-// thesis (Jang 2019, §3.2.2) uses it as the low-frequency prior that Mahony's
+// thesis (Lee 2021, §3.2.2) uses it as the low-frequency prior that Mahony's
 // filter fuses with the gyro; here it also initialises that filter.
 //
 // With B = Σ w_i b_i r_iᵀ (b: unit vectors in the body, r: the same

@@ -4,7 +4,7 @@
 // reasons behind each choice, is docs/ftm-hid-protocol.md; the constants and
 // layouts here must match it byte for byte.
 //
-// The board (Jang 2019, §3.2.1) reads four MPU-9250 IMUs (accelerometer, gyro,
+// The board (Lee 2021, §3.2.1) reads four MPU-9250 IMUs (accelerometer, gyro,
 // AK8963 compass) at 200 Hz and three soft capacitive bend sensors at 1 kHz.
 // Four numbered HID reports, little-endian, each ending in hid::crc16_ccitt:
 //   0x51 IMU tick    (input,   64 bytes): two of the four IMUs at one tick

@@ -1,5 +1,5 @@
 #pragma once
-// The FTM glove's evaluation (Jang 2019 ch. 4; issue 27 §5), what `proprio
+// The FTM glove's evaluation (Lee 2021 ch. 4; issue 27 §5), what `proprio
 // bench ftm` runs. Every case goes through the full pipeline: the compass and
 // mounting calibration come from the simulated wearer's figure-eight and its
 // imperfectly held poses (ftm_sim::calibrate_from_wearer), never from truth.

@@ -1,5 +1,5 @@
 #pragma once
-// A simulated wearer of the FTM glove (Jang 2019, ch. 3; issue 27 §1): the
+// A simulated wearer of the FTM glove (Lee 2021, ch. 3; issue 27 §1): the
 // samples the glove's read-out board and the external wrist tracker deliver,
 // with ground truth kept apart (truth_at), for the FTM tracker, its
 // calibration and its benchmarks.

@@ -1,5 +1,5 @@
 #pragma once
-// The simulated participant wearing the FTM glove (issue 27; Jang 2019's
+// The simulated participant wearing the FTM glove (issue 27; Lee 2021's
 // glove, the one the thesis's peg-in-hole study used): `--tracker ftm`.
 //
 // One glove per participant, donned once: a simulated FTM wearer

@@ -129,6 +129,7 @@ int run_bench_vist(const BenchVistArgs& a) {
   double done_s = 0.0;
   std::size_t next = 0;
   int failures = 0;
+  std::vector<std::string> case_error(cases.size());  // the first session error of each case
   std::vector<std::future<Result<vist_eval::SessionResult>>> running;
   std::vector<std::size_t> running_job;
   auto launch = [&] {
@@ -146,6 +147,7 @@ int run_bench_vist(const BenchVistArgs& a) {
     running_job.erase(running_job.begin());
     if (!r) {
       logger().error("{} subject {}: {}", cases[j.case_index].name, j.spec.subject, r.error().message);
+      if (case_error[j.case_index].empty()) case_error[j.case_index] = r.error().message;
       ++failures;
       continue;
     }
@@ -171,9 +173,26 @@ int run_bench_vist(const BenchVistArgs& a) {
                 "all26 mm", "NEES", "x RT");
   }
   for (std::size_t c = 0; c < cases.size(); ++c) {
+    // A case with no session that ran has no figures: it says so, never 0.0 mm.
+    if (results[c].empty()) {
+      out["cases"].push_back({{"name", cases[c].name}, {"ran", false}, {"error", case_error[c]}});
+      if (!a.json) std::printf("%-26s did not run: %s\n", cases[c].name.c_str(), case_error[c].c_str());
+      continue;
+    }
     const auto agg = vist_eval::aggregate(cases[c].name, results[c]);
-    out["cases"].push_back(to_json(agg));
+    nlohmann::json jc = to_json(agg);
+    jc["ran"] = true;
+    const auto failed = static_cast<std::size_t>(a.subjects) - results[c].size();
+    if (failed > 0) {
+      jc["sessions_failed"] = failed;
+      jc["error"] = case_error[c];
+    }
+    out["cases"].push_back(std::move(jc));
     if (!a.json) {
+      if (failed > 0) {
+        std::printf("%-26s %zu of %d session(s) did not run (%s); the figures are the others'\n", cases[c].name.c_str(),
+                    failed, a.subjects, case_error[c].c_str());
+      }
       std::printf("%-26s %8.2f %8.2f %7.1f%% %7.1f%% %8.3f %9.2f %8.2f %8.1f\n", cases[c].name.c_str(),
                   agg.keypoints.mean_mm, agg.keypoints.p95_mm, 100 * agg.keypoints.pck20, 100 * agg.keypoints.pck35,
                   agg.keypoints.auc50, agg.all_joints.mean_mm, agg.nees_mean, agg.realtime_factor);

@@ -158,7 +158,8 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
   if (spec.mode == FrameMode::images && spec.challenge != Challenge::none &&
       spec.challenge != Challenge::dropped_frames && spec.challenge != Challenge::distractors) {
     return make_error(Errc::unsupported, "VIST evaluation: the " + std::string(to_string(spec.challenge)) +
-                                        " challenge hides markers by identity, which only the detections mode can do");
+                                        " challenge runs only in the detections mode so far (it is applied to "
+                                        "markers and IMU samples by identity, not rendered)");
   }
   auto subject = sim::sim_subject(spec.subject);
   if (!subject) return subject.error();

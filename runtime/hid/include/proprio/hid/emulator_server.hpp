@@ -144,6 +144,7 @@ class EmulatorServer {
     Rng latency_rng;
     bool started = false;
     TimeNs t0 = 0;
+    TimeNs last_release_ns = 0;
     std::vector<Report> out;
   };
   static void pump_locked(State& state, FakeHidLink& link) {
@@ -155,7 +156,13 @@ class EmulatorServer {
                                     ? static_cast<DurationNs>(state.latency_rng.below(
                                           static_cast<std::uint64_t>(state.options.latency_jitter_ns) + 1))
                                     : 0;
-      link.push(r.bytes, state.t0 + r.send_ns + state.options.latency_min_ns + jitter);
+      // A device's reports leave through one FIFO: a later report's jitter can
+      // delay it but never overtake an earlier one (that is the link's reorder
+      // fault, drawn on its own). Without this a restart's first report, sent
+      // microseconds after the old stream's last, could arrive before it.
+      state.last_release_ns =
+          std::max(state.last_release_ns, state.t0 + r.send_ns + state.options.latency_min_ns + jitter);
+      link.push(r.bytes, state.last_release_ns);
     }
   }
 

@@ -8,8 +8,10 @@
 
 #include <array>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <initializer_list>
+#include <string>
 #include <vector>
 
 #include "layer_test_util.hpp"
@@ -151,6 +153,19 @@ inline double fingertip_error_m(const std::vector<Sample>& served, const std::ve
     }
   }
   return compared ? sum / static_cast<double>(compared) : 1e9;
+}
+
+// The config keys that put a source's wrist on the mock's right-hand tracker:
+// its tracker-to-wrist offset, as TOML lines.
+inline std::string tracker_wrist_offset_toml() {
+  namespace mx = proprio::mock_xr;
+  const proprio::Pose T_tracker_wrist = proprio::from_xr(mx::to_xr(mx::tracker_to_wrist(mx::Hand::right)));
+  const proprio::Vec3 r = proprio::so3_log(T_tracker_wrist.q) * (180.0 / M_PI);
+  char offsets[256];
+  std::snprintf(offsets, sizeof offsets,
+                "wrist_offset_position_m = [%.9f, %.9f, %.9f]\nwrist_offset_rotation_deg = [%.9f, %.9f, %.9f]\n",
+                T_tracker_wrist.p.x(), T_tracker_wrist.p.y(), T_tracker_wrist.p.z(), r.x(), r.y(), r.z());
+  return offsets;
 }
 
 }  // namespace layer_test

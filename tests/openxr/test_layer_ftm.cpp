@@ -72,19 +72,14 @@ class LayerFtm : public ::testing::Test {
 
 TEST_F(LayerFtm, AnEmulatedFtmBoardOnATrackedWrist) {
   const auto truth_file = dir_.path() / "ftm_truth.csv";
-  const Pose T_tracker_wrist = from_xr(mx::to_xr(mx::tracker_to_wrist(mx::Hand::right)));
-  const Vec3 r = so3_log(T_tracker_wrist.q) * (180.0 / M_PI);
-  char offsets[256];
-  std::snprintf(offsets, sizeof offsets,
-                "wrist_offset_position_m = [%.9f, %.9f, %.9f]\nwrist_offset_rotation_deg = [%.9f, %.9f, %.9f]\n",
-                T_tracker_wrist.p.x(), T_tracker_wrist.p.y(), T_tracker_wrist.p.z(), r.x(), r.y(), r.z());
+  const std::string offsets = layer_test::tracker_wrist_offset_toml();
   // The board's cable comes out 3 s after the source starts, for 1.5 s.
   constexpr double kUnplugAtS = 3.0, kUnplugForS = 1.5, kRunS = 8.0;
   char unplug[64];
   std::snprintf(unplug, sizeof unplug, "unplug_s = [%.1f, %.1f]\n", kUnplugAtS, kUnplugForS);
   use_config("[layer]\nmax_prediction_ms = 100\nstale_timeout_ms = 200\n[[source]]\ntype = \"ftm\"\n"
              "input = \"emulated\"\nsubject = 4\nseed = 3\nhands = [\"right\"]\nwrist = \"tracker\"\n" +
-             std::string(offsets) + "truth_path = \"" + truth_file.string() + "\"\n" + unplug);
+             offsets + "truth_path = \"" + truth_file.string() + "\"\n" + unplug);
   XrHandTrackingLatencyPROPRIO latency{};
   std::vector<layer_test::Frame> frames;
   const auto served = layer_test::run_app(Handedness::right, kRunS, &latency, &frames);

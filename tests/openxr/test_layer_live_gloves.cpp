@@ -39,15 +39,10 @@ class LayerLiveGloves : public ::testing::Test {
 
 TEST_F(LayerLiveGloves, AnEmulatedStretchGloveOnATrackedWrist) {
   const auto truth_file = dir_.path() / "truth.csv";
-  const Pose T_tracker_wrist = from_xr(mx::to_xr(mx::tracker_to_wrist(mx::Hand::right)));
-  const Vec3 r = so3_log(T_tracker_wrist.q) * (180.0 / M_PI);
-  char offsets[256];
-  std::snprintf(offsets, sizeof offsets,
-                "wrist_offset_position_m = [%.9f, %.9f, %.9f]\nwrist_offset_rotation_deg = [%.9f, %.9f, %.9f]\n",
-                T_tracker_wrist.p.x(), T_tracker_wrist.p.y(), T_tracker_wrist.p.z(), r.x(), r.y(), r.z());
+  const std::string offsets = layer_test::tracker_wrist_offset_toml();
   // The board's cable comes out 2.5 s in, for 1 s.
   use_config("[layer]\nmax_prediction_ms = 100\nstale_timeout_ms = 200\n[[source]]\ntype = \"glove\"\n"
-             "input = \"emulated\"\nsubject = 11\nhands = [\"right\"]\nwrist = \"tracker\"\n" + std::string(offsets) +
+             "input = \"emulated\"\nsubject = 11\nhands = [\"right\"]\nwrist = \"tracker\"\n" + offsets +
              "truth_path = \"" + truth_file.string() + "\"\nunplug_s = [2.5, 1.0]\n");
   XrHandTrackingLatencyPROPRIO latency{};
   std::vector<Frame> frames;

@@ -168,15 +168,9 @@ double watch(FtmBoardDevice& device, double seconds, double interval_s, Latest& 
 // monitor
 
 int monitor_live(const HidMonitorArgs& a) {
-  hid::HidDeviceSelector sel = ftm_board_selector();
-  sel.vendor_id = parse_hex_id(a.vid);
-  sel.product_id = parse_hex_id(a.pid);
-  sel.serial = a.serial;
-  sel.path = a.path;
-  // A path that names no hidraw node will not become one: say so now.
-  if (!a.path.empty()) {
-    if (auto s = hid::check_hidraw_node(a.path); !s) return report_error(s.error());
-  }
+  auto selected = monitor_selector(a, ftm_board_selector());
+  if (!selected) return report_error(selected.error());
+  const hid::HidDeviceSelector& sel = *selected;
   FtmBoardDevice device(std::make_unique<hid::HidapiTransport>(sel));
   device.set_state_callback(print_link_state);
   if (a.seconds > 0) {

@@ -159,16 +159,9 @@ int monitor_file(const MonitorArgs& a) {
 }
 
 int monitor_live(const MonitorArgs& a) {
-  hid::HidDeviceSelector sel;
-  sel.vendor_id = parse_hex_id(a.vid);
-  sel.product_id = parse_hex_id(a.pid);
-  sel.serial = a.serial;
-  sel.path = a.path;
-  // A path that names no hidraw node will not become one: say so now rather
-  // than retrying to open it until --seconds run out.
-  if (!a.path.empty()) {
-    if (auto s = hid::check_hidraw_node(a.path); !s) return report_error(s.error());
-  }
+  auto selected = monitor_selector(a);
+  if (!selected) return report_error(selected.error());
+  const hid::HidDeviceSelector& sel = *selected;
   ImuGloveDeviceOptions o;
   o.stream.nominal_rate_hz = a.rate_hz;
   ImuGloveDevice device(std::make_unique<hid::HidapiTransport>(sel), o);

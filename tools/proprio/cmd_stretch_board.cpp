@@ -294,16 +294,9 @@ double watch(StretchDevice& device, double seconds, double interval_s, LatestVal
 
 
 int monitor_live(const MonitorArgs& a) {
-  hid::HidDeviceSelector sel = stretch_board_selector();
-  sel.vendor_id = parse_hex_id(a.vid);
-  sel.product_id = parse_hex_id(a.pid);
-  sel.serial = a.serial;
-  sel.path = a.path;
-  // A path that names no hidraw node will not become one: say so now rather
-  // than retrying to open it until --seconds run out.
-  if (!a.path.empty()) {
-    if (auto s = hid::check_hidraw_node(a.path); !s) return report_error(s.error());
-  }
+  auto selected = monitor_selector(a, stretch_board_selector());
+  if (!selected) return report_error(selected.error());
+  const hid::HidDeviceSelector& sel = *selected;
   StretchDeviceOptions o;
   o.stream = stream_options(a);
   StretchDevice device(std::make_unique<hid::HidapiTransport>(sel), o);

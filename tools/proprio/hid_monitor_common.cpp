@@ -103,6 +103,17 @@ void print_link_state(hid::LinkState state, std::string_view detail) {
   std::fflush(stdout);
 }
 
+Result<hid::HidDeviceSelector> monitor_selector(const HidMonitorArgs& args, hid::HidDeviceSelector base) {
+  base.vendor_id = parse_hex_id(args.vid);
+  base.product_id = parse_hex_id(args.pid);
+  base.serial = args.serial;
+  base.path = args.path;
+  if (!args.path.empty()) {
+    if (auto s = hid::check_hidraw_node(args.path); !s) return s.error();
+  }
+  return base;
+}
+
 void add_hid_monitor_options(CLI::App& monitor, HidMonitorArgs& args, const std::string& serial_help) {
   monitor.add_option("--vid", args.vid, "USB vendor ID, hexadecimal")->check(check_hex)->capture_default_str();
   monitor.add_option("--pid", args.pid, "USB product ID, hexadecimal")->check(check_hex)->capture_default_str();

@@ -10,6 +10,7 @@
 
 #include "commands.hpp"
 #include "proprio/core/time.hpp"
+#include "proprio/hid/hid_transport.hpp"
 #include "proprio/hid/link_state.hpp"
 
 namespace proprio::cli {
@@ -38,6 +39,11 @@ struct HidMonitorArgs {
   double seconds = 0.0;
   double interval_s = 1.0;
 };
+
+// The device monitor opens: `base` (the board's selector, usage page and all)
+// with the IDs, serial and path given. A --path that names no hidraw node is
+// refused now rather than retried until --seconds run out.
+Result<hid::HidDeviceSelector> monitor_selector(const HidMonitorArgs& args, hid::HidDeviceSelector base = {});
 
 // Adds --vid, --pid, --serial (help: serial_help), --path, --seconds and --interval.
 void add_hid_monitor_options(CLI::App& monitor, HidMonitorArgs& args, const std::string& serial_help);

@@ -79,7 +79,7 @@ TEST_F(LayerLiveGloves, AnEmulatedStretchGloveOnATrackedWrist) {
 // process's life, and this stand-in must not replace the real vist plugin for
 // the other tests. Prints what failed; true when all held.
 bool head_provider_matches_the_mock_view() {
-  const auto served = run_app(Handedness::right, 1.5, nullptr);
+  const auto served = run_app(Handedness::right, 3.0, nullptr);
   if (served.size() < 50) {
     std::fprintf(stderr, "only %zu tracked poses served\n", served.size());
     return false;

@@ -467,12 +467,20 @@ void install_mujoco_log_hooks() {
   });
 }
 
+}  // namespace
+// Named, not anonymous: Impl holds them, and in a unity build GCC warns about
+// members of anonymous-namespace types.
+namespace contact_sim_detail {
 struct ModelDeleter {
   void operator()(mjModel* m) const noexcept { mj_deleteModel(m); }
 };
 struct DataDeleter {
   void operator()(mjData* d) const noexcept { mj_deleteData(d); }
 };
+}  // namespace contact_sim_detail
+namespace {
+using contact_sim_detail::DataDeleter;
+using contact_sim_detail::ModelDeleter;
 
 Result<std::unique_ptr<mjModel, ModelDeleter>> compile(const std::string& xml) {
   // 2.2.2 has no mj_addBufferVFS: make an empty file and copy the text in.

@@ -15,7 +15,7 @@ namespace proprio::haptics {
 
 namespace {
 
-std::string g(double v) {
+std::string num4(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.4g", v);
   return buf;
@@ -242,11 +242,11 @@ Status PlatformParams::validate(const DeviceLimits& limits) const {
       const double az = 2.0 * M_PI * j / directions;
       const FingertipForce f{fn, shear * std::cos(az), shear * std::sin(az)};
       const Vec3 d = k.displacement(f);
-      const std::string where = "normal " + g(fn) + " N with shear " + g(shear) + " N toward " +
-                                g(az * 180.0 / M_PI) + " deg (from +X toward +Z)";
+      const std::string where = "normal " + num4(fn) + " N with shear " + num4(shear) + " N toward " +
+                                num4(az * 180.0 / M_PI) + " deg (from +X toward +Z)";
       if (!(d.y() < anchor_height_m)) {
-        return bad("the plate would have to rise " + g(d.y() * 1e3) + " mm, past the wire exits at 'platform."
-                   "anchor_height_m' = " + g(anchor_height_m * 1e3) + " mm, to press " + where +
+        return bad("the plate would have to rise " + num4(d.y() * 1e3) + " mm, past the wire exits at 'platform."
+                   "anchor_height_m' = " + num4(anchor_height_m * 1e3) + " mm, to press " + where +
                    "; raise the exits, stiffen the fingertip model or lower 'limits.max_normal_n'");
       }
       Vec3 t;
@@ -255,7 +255,7 @@ Status PlatformParams::validate(const DeviceLimits& limits) const {
       }
       for (Eigen::Index i = 0; i < 3; ++i) {
         if (t[i] < -1e-9) {
-          return bad("wire " + std::to_string(i) + " would have to push (tension " + g(t[i]) + " N) to render " +
+          return bad("wire " + std::to_string(i) + " would have to push (tension " + num4(t[i]) + " N) to render " +
                      where + "; widen 'platform.anchor_radius_m', lower 'platform.anchor_height_m', or reduce "
                      "'limits.friction_coefficient' / 'limits.max_shear_n'");
         }

@@ -25,7 +25,7 @@ Error option_error(const char* field, double value, const char* rule) {
   return make_error(Errc::invalid_argument, buf);
 }
 
-std::string ms(DurationNs ns) {
+std::string emulator_ms(DurationNs ns) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g ms", static_cast<double>(ns) / kNsPerMillisecond);
   return buf;
@@ -251,8 +251,8 @@ std::string FingertipSafetyOptions::describe() const {
   char buf[240];
   std::snprintf(buf, sizeof buf,
                 "watchdog %s, ramp %s, max normal %.3g N, max shear %.3g N, angles [%.3g, %.3g] rad, stall after %s",
-                ms(watchdog_ns).c_str(), ms(ramp_ns).c_str(), max_normal_force_n, max_shear_force_n, min_angle_rad,
-                max_angle_rad, ms(stall_time_ns).c_str());
+                emulator_ms(watchdog_ns).c_str(), emulator_ms(ramp_ns).c_str(), max_normal_force_n, max_shear_force_n, min_angle_rad,
+                max_angle_rad, emulator_ms(stall_time_ns).c_str());
   return buf;
 }
 

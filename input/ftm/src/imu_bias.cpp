@@ -9,9 +9,9 @@
 namespace proprio::ftm {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
+constexpr double kRadPerDeg = M_PI / 180.0;
 
-bool finite_positive(double x) { return std::isfinite(x) && x > 0.0; }
+bool positive_finite(double x) { return std::isfinite(x) && x > 0.0; }
 
 // Samples the estimators use: no status bit but the compass's overflow (the
 // compass is not used here), finite accelerometer and gyro.
@@ -33,15 +33,15 @@ Status StillBiasOptions::validate() const {
     return make_error(Errc::invalid_argument,
                       std::string("StillBiasOptions.") + field + " " + why + " (" + describe() + ")");
   };
-  if (!finite_positive(window_s) || window_s > 60.0) return fail("window_s", "must be in (0, 60] s");
-  if (!finite_positive(max_gyro_std_radps)) return fail("max_gyro_std_radps", "must be > 0");
-  if (!finite_positive(max_accel_std_mps2)) return fail("max_accel_std_mps2", "must be > 0");
-  if (!finite_positive(max_gyro_bias_radps)) return fail("max_gyro_bias_radps", "must be > 0");
-  if (!finite_positive(max_tilt_drift_rad) || max_tilt_drift_rad > M_PI) {
+  if (!positive_finite(window_s) || window_s > 60.0) return fail("window_s", "must be in (0, 60] s");
+  if (!positive_finite(max_gyro_std_radps)) return fail("max_gyro_std_radps", "must be > 0");
+  if (!positive_finite(max_accel_std_mps2)) return fail("max_accel_std_mps2", "must be > 0");
+  if (!positive_finite(max_gyro_bias_radps)) return fail("max_gyro_bias_radps", "must be > 0");
+  if (!positive_finite(max_tilt_drift_rad) || max_tilt_drift_rad > M_PI) {
     return fail("max_tilt_drift_rad", "must be in (0, pi]");
   }
-  if (!finite_positive(gravity_mps2)) return fail("gravity_mps2", "must be > 0");
-  if (!finite_positive(max_gravity_error_mps2)) return fail("max_gravity_error_mps2", "must be > 0");
+  if (!positive_finite(gravity_mps2)) return fail("gravity_mps2", "must be > 0");
+  if (!positive_finite(max_gravity_error_mps2)) return fail("max_gravity_error_mps2", "must be > 0");
   return {};
 }
 
@@ -50,8 +50,8 @@ std::string StillBiasOptions::describe() const {
   std::snprintf(buf, sizeof buf,
                 "still window %.3g s: gyro std <= %.3g deg/s, accel std <= %.3g m/s^2, |mean gyro| <= %.3g deg/s, "
                 "tilt drift <= %.3g deg, | |a| - %.5g | <= %.3g m/s^2",
-                window_s, max_gyro_std_radps / kDeg, max_accel_std_mps2, max_gyro_bias_radps / kDeg,
-                max_tilt_drift_rad / kDeg, gravity_mps2, max_gravity_error_mps2);
+                window_s, max_gyro_std_radps / kRadPerDeg, max_accel_std_mps2, max_gyro_bias_radps / kRadPerDeg,
+                max_tilt_drift_rad / kRadPerDeg, gravity_mps2, max_gravity_error_mps2);
   return buf;
 }
 
@@ -117,16 +117,16 @@ Result<StillBiasEstimate> StillBiasAccumulator::estimate() const {
     return make_error(Errc::out_of_range, buf);
   };
   if (e.gyro_std_radps > options_.max_gyro_std_radps) {
-    return refuse("gyro std (deg/s)", e.gyro_std_radps / kDeg, options_.max_gyro_std_radps / kDeg);
+    return refuse("gyro std (deg/s)", e.gyro_std_radps / kRadPerDeg, options_.max_gyro_std_radps / kRadPerDeg);
   }
   if (e.accel_std_mps2 > options_.max_accel_std_mps2) {
     return refuse("accel std (m/s^2)", e.accel_std_mps2, options_.max_accel_std_mps2);
   }
   if (e.gyro_bias_radps.norm() > options_.max_gyro_bias_radps) {
-    return refuse("mean rate (deg/s)", e.gyro_bias_radps.norm() / kDeg, options_.max_gyro_bias_radps / kDeg);
+    return refuse("mean rate (deg/s)", e.gyro_bias_radps.norm() / kRadPerDeg, options_.max_gyro_bias_radps / kRadPerDeg);
   }
   if (e.tilt_drift_rad > options_.max_tilt_drift_rad) {
-    return refuse("tilt drift (deg)", e.tilt_drift_rad / kDeg, options_.max_tilt_drift_rad / kDeg);
+    return refuse("tilt drift (deg)", e.tilt_drift_rad / kRadPerDeg, options_.max_tilt_drift_rad / kRadPerDeg);
   }
   const double g_err = std::abs(e.mean_accel_mps2.norm() - options_.gravity_mps2);
   if (g_err > options_.max_gravity_error_mps2) {
@@ -151,15 +151,15 @@ Status AccelBiasFitOptions::validate() const {
     return make_error(Errc::invalid_argument,
                       std::string("AccelBiasFitOptions.") + field + " " + why + " (" + describe() + ")");
   };
-  if (!finite_positive(gravity_mps2)) return fail("gravity_mps2", "must be > 0");
-  if (!finite_positive(max_rate_radps)) return fail("max_rate_radps", "must be > 0");
-  if (!finite_positive(max_gravity_error_mps2)) return fail("max_gravity_error_mps2", "must be > 0");
-  if (!finite_positive(min_direction_spread) || min_direction_spread > 1.0 / 3.0) {
+  if (!positive_finite(gravity_mps2)) return fail("gravity_mps2", "must be > 0");
+  if (!positive_finite(max_rate_radps)) return fail("max_rate_radps", "must be > 0");
+  if (!positive_finite(max_gravity_error_mps2)) return fail("max_gravity_error_mps2", "must be > 0");
+  if (!positive_finite(min_direction_spread) || min_direction_spread > 1.0 / 3.0) {
     return fail("min_direction_spread", "must be in (0, 1/3]");
   }
   if (min_samples < 4) return fail("min_samples", "must be >= 4");
-  if (!finite_positive(max_bias_mps2)) return fail("max_bias_mps2", "must be > 0");
-  if (!finite_positive(max_residual_rms_mps2)) return fail("max_residual_rms_mps2", "must be > 0");
+  if (!positive_finite(max_bias_mps2)) return fail("max_bias_mps2", "must be > 0");
+  if (!positive_finite(max_residual_rms_mps2)) return fail("max_residual_rms_mps2", "must be > 0");
   return {};
 }
 

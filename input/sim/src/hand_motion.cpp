@@ -1,5 +1,6 @@
 #include "proprio/sim/hand_motion.hpp"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -8,7 +9,6 @@ namespace proprio::sim {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 // Half-width of the central difference that gives the ground-truth velocities.
 constexpr double kVelocityStepS = 0.5e-3;
 
@@ -137,7 +137,7 @@ HandMotionGenerator::HandMotionGenerator(HandModel model, HandMotionOptions opti
   }
   power_ = degrees({35, 30, 40, 45, 70, 0, 85, 55, 72, 0, 88, 58, 75, -3, 88, 58, 78, -8, 85, 55});
   Rng head_rng(mix_seed(options.seed, 1));
-  for (auto& ph : head_phase_) ph = head_rng.uniform(0.0, 2.0 * kPi);
+  for (auto& ph : head_phase_) ph = head_rng.uniform(0.0, 2.0 * std::numbers::pi);
 }
 
 HandMotionGenerator::Keyframe HandMotionGenerator::make_keyframe(std::size_t k) {
@@ -215,11 +215,11 @@ Pose HandMotionGenerator::head_at(double t) const {
   if (!options_.head_sway) return options_.T_world_head_rest;
   // Slow sway of a seated person: a few degrees and about a centimetre.
   const auto& ph = head_phase_;
-  const Vec3 rotation(deg_to_rad(3.0) * std::sin(0.21 * 2 * kPi * t + ph[0]),
-                      deg_to_rad(5.0) * std::sin(0.13 * 2 * kPi * t + ph[1]),
-                      deg_to_rad(2.0) * std::sin(0.17 * 2 * kPi * t + ph[2]));
-  const Vec3 offset(0.010 * std::sin(0.11 * 2 * kPi * t + ph[3]), 0.005 * std::sin(0.19 * 2 * kPi * t + ph[4]),
-                    0.010 * std::sin(0.07 * 2 * kPi * t + ph[5]));
+  const Vec3 rotation(deg_to_rad(3.0) * std::sin(0.21 * 2 * std::numbers::pi * t + ph[0]),
+                      deg_to_rad(5.0) * std::sin(0.13 * 2 * std::numbers::pi * t + ph[1]),
+                      deg_to_rad(2.0) * std::sin(0.17 * 2 * std::numbers::pi * t + ph[2]));
+  const Vec3 offset(0.010 * std::sin(0.11 * 2 * std::numbers::pi * t + ph[3]), 0.005 * std::sin(0.19 * 2 * std::numbers::pi * t + ph[4]),
+                    0.010 * std::sin(0.07 * 2 * std::numbers::pi * t + ph[5]));
   return options_.T_world_head_rest * Pose{so3_exp(rotation), offset};
 }
 

@@ -1,5 +1,6 @@
 #include "proprio/sim/stereo_image_sim.hpp"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -11,7 +12,6 @@ namespace proprio::sim {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr std::uint8_t kNoBody = 255;
 constexpr std::uint8_t kFirstMarkerId = 64;  // owner ids from here on are markers (64 + index); below: hand bodies
 
@@ -478,7 +478,7 @@ void StereoImageSimulator::build_wall() {
       const int n = 3 + static_cast<int>(rng.below(4));
       const double radius = rng.uniform(20.0, 200.0);
       for (int v = 0; v < n; ++v) {
-        const double a = 2.0 * kPi * (v + rng.uniform(0.0, 0.8)) / n;
+        const double a = 2.0 * std::numbers::pi * (v + rng.uniform(0.0, 0.8)) / n;
         const double rr = radius * rng.uniform(0.4, 1.0);
         poly[static_cast<std::size_t>(v)] =
             p + cv::Point(static_cast<int>(rr * std::cos(a)), static_cast<int>(rr * std::sin(a)));
@@ -493,7 +493,7 @@ void StereoImageSimulator::build_wall() {
     const cv::Scalar colour(c[0], c[1], c[2]);
     const cv::Point p = point(0.0);
     if (rng.uniform01() < 0.5) {
-      const double a = rng.uniform(0.0, kPi);
+      const double a = rng.uniform(0.0, std::numbers::pi);
       const double len = rng.uniform(150.0, 600.0);
       const cv::Point q = p + cv::Point(static_cast<int>(len * std::cos(a)), static_cast<int>(len * std::sin(a)));
       cv::line(wall_, p, q, colour, 2 + static_cast<int>(rng.below(4)), cv::LINE_AA);

@@ -1,5 +1,6 @@
 #include "proprio/sim/stereo_sim.hpp"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -9,7 +10,6 @@ namespace proprio::sim {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 // Markers on the palm move with the wrist: the model's non-thumb metacarpals
 // are rigid with it, so the palm capsules are one body with the WRIST segment.
@@ -276,8 +276,8 @@ StereoFrame StereoMarkerSimulator::simulate(const HandPose& hand, const Pose& T_
 
   const std::array<Vec3, 2> c_world = {T_world_lc.p, T_world_lc * Vec3(rig_.baseline_m, 0.0, 0.0)};
   const bool mirror = hand.hand != markers_hand_;
-  const double cos_facing_max = std::cos(o.facing_max_deg * kPi / 180.0);
-  const double area_per_z = kPi * k.fx_px * k.fy_px;  // times (d/2)^2 cos(alpha) r / z^3
+  const double cos_facing_max = std::cos(o.facing_max_deg * std::numbers::pi / 180.0);
+  const double area_per_z = std::numbers::pi * k.fx_px * k.fy_px;  // times (d/2)^2 cos(alpha) r / z^3
   const double u_lo = -0.5;
   const double u_hi = static_cast<double>(k.width_px) - 0.5;
   const double v_lo = -0.5;
@@ -337,7 +337,7 @@ StereoFrame StereoMarkerSimulator::simulate(const HandPose& hand, const Pose& T_
         }
       } else {
         // Lee 2021 eq. (4.10), used as the probability of detection.
-        const double alpha_deg = std::acos(std::clamp(cos_alpha, -1.0, 1.0)) * 180.0 / kPi;
+        const double alpha_deg = std::acos(std::clamp(cos_alpha, -1.0, 1.0)) * 180.0 / std::numbers::pi;
         const double p_seen =
             std::clamp((o.facing_alpha_max_deg - alpha_deg) / (o.facing_alpha_max_deg - o.facing_alpha_min_deg), 0.0, 1.0);
         if (!(u_face < p_seen)) {
@@ -390,7 +390,7 @@ StereoFrame StereoMarkerSimulator::simulate(const HandPose& hand, const Pose& T_
       mt.u_px = u;
       mt.v_px = v;
       mt.area_px2 = area;
-      mt.facing_deg = std::acos(std::clamp(cos_alpha, -1.0, 1.0)) * 180.0 / kPi;
+      mt.facing_deg = std::acos(std::clamp(cos_alpha, -1.0, 1.0)) * 180.0 / std::numbers::pi;
       seen[c].push_back(mt);
       frame.cameras[c].markers.push_back(Marker{marker_hue_code(m.hue), static_cast<float>(u_obs),
                                                 static_cast<float>(v_obs), static_cast<float>(area_obs)});

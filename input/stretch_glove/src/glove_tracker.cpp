@@ -6,7 +6,7 @@
 namespace proprio::stretch_glove {
 namespace {
 
-std::optional<Finger> finger_of(HandJoint j) {
+std::optional<Finger> finger_owning(HandJoint j) {
   const std::size_t i = index_of(j);
   if (i < index_of(HandJoint::thumb_metacarpal)) return std::nullopt;
   if (i <= index_of(HandJoint::thumb_tip)) return Finger::thumb;
@@ -17,7 +17,7 @@ std::uint8_t bit(Finger f) { return static_cast<std::uint8_t>(1u << static_cast<
 
 // Which fingers' DoFs a cell informs, for the TRACKED flags.
 std::uint8_t fingers_informed_by(const StretchCell& c) {
-  if (auto f = finger_of(c.segment)) {
+  if (auto f = finger_owning(c.segment)) {
     std::uint8_t m = bit(*f);
     // A web cell spans its finger and the next one toward the little finger.
     if (c.category == StretchCellCategory::abduction && *f != Finger::little) {
@@ -155,7 +155,7 @@ bool GloveTracker::process(const CellFrame& frame, HandPose& out) {
     return false;
   }
   for (std::size_t j = 0; j < kHandJointCount; ++j) {
-    const auto f = finger_of(joint_at(j));
+    const auto f = finger_owning(joint_at(j));
     bool tracked = wrist_tracked && !held;
     if (f) {
       const std::size_t first = first_dof_of(*f);

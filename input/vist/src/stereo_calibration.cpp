@@ -19,7 +19,7 @@ namespace proprio::vist {
 
 namespace {
 
-std::string fmt(const char* format, double v) {
+std::string fmt_num(const char* format, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, format, v);
   return buf;
@@ -106,7 +106,7 @@ Status CheckerboardSpec::validate() const {
                           "orientation is unambiguous; print a board with one more or one fewer column");
   }
   if (!(square_m > 0.0) || !(square_m < 1.0)) {
-    return make_error(Errc::out_of_range, "checkerboard square size " + fmt("%g", square_m * 1e3) +
+    return make_error(Errc::out_of_range, "checkerboard square size " + fmt_num("%g", square_m * 1e3) +
                                               " mm is not a plausible printed square (0-1000 mm); measure one "
                                               "square of the printed board with a ruler");
   }
@@ -115,7 +115,7 @@ Status CheckerboardSpec::validate() const {
 
 std::string CheckerboardSpec::describe() const {
   return std::to_string(inner_cols) + "x" + std::to_string(inner_rows) + " inner corners, " +
-         fmt("%.2f", square_m * 1e3) + " mm squares";
+         fmt_num("%.2f", square_m * 1e3) + " mm squares";
 }
 
 Result<CheckerboardSpec> CheckerboardSpec::parse(std::string_view cols_x_rows, double square_mm) {
@@ -208,7 +208,7 @@ void match_corner_order(const std::vector<cv::Point2f>& left, std::vector<cv::Po
 Status StereoCalibrationOptions::validate() const {
   if (auto s = board.validate(); !s) return s;
   if (!(alpha >= 0.0 && alpha <= 1.0)) {
-    return make_error(Errc::out_of_range, "rectification alpha " + fmt("%g", alpha) +
+    return make_error(Errc::out_of_range, "rectification alpha " + fmt_num("%g", alpha) +
                                               " is outside [0, 1] (0: only valid pixels, 1: all source pixels)");
   }
   if (min_pairs < 3) {
@@ -222,11 +222,11 @@ Status StereoCalibrationOptions::validate() const {
 }
 
 std::string StereoCalibrationOptions::describe() const {
-  std::string s = "board " + board.describe() + ", alpha " + fmt("%g", alpha) + ", distortion k1 k2";
+  std::string s = "board " + board.describe() + ", alpha " + fmt_num("%g", alpha) + ", distortion k1 k2";
   if (!fix_tangential) s += " p1 p2";
   if (!fix_k3) s += " k3";
-  s += ", at least " + std::to_string(min_pairs) + " pairs, outliers above " + fmt("%g", outlier_factor) +
-       "x median and " + fmt("%g", outlier_min_px) + " px";
+  s += ", at least " + std::to_string(min_pairs) + " pairs, outliers above " + fmt_num("%g", outlier_factor) +
+       "x median and " + fmt_num("%g", outlier_min_px) + " px";
   return s;
 }
 
@@ -270,15 +270,15 @@ std::string StereoCalibration::describe() const {
     << pairs.size() << " of " << total << " pairs used";
   if (!skipped.empty()) s << " (board not seen in both: " << name_list(skipped) << ")";
   s << "\n";
-  s << "RMS reprojection error: left " << fmt("%.3f", left.rms_px) << " px, right " << fmt("%.3f", right.rms_px)
-    << " px (each camera alone), stereo " << fmt("%.3f", rms_stereo_px) << " px\n";
+  s << "RMS reprojection error: left " << fmt_num("%.3f", left.rms_px) << " px, right " << fmt_num("%.3f", right.rms_px)
+    << " px (each camera alone), stereo " << fmt_num("%.3f", rms_stereo_px) << " px\n";
   auto cam = [&](const char* label, const CameraCalibration& c) {
     const auto& sd = c.intrinsics_sigma_px;
-    s << label << " fx " << fmt("%.2f", c.fx()) << " ± " << fmt("%.2f", sd[0]) << ", fy " << fmt("%.2f", c.fy())
-      << " ± " << fmt("%.2f", sd[1]) << ", cx " << fmt("%.2f", c.cx()) << " ± " << fmt("%.2f", sd[2]) << ", cy "
-      << fmt("%.2f", c.cy()) << " ± " << fmt("%.2f", sd[3]) << " px; k1 " << fmt("%.4f", c.dist[0]) << ", k2 "
-      << fmt("%.4f", c.dist[1]) << ", p1 " << fmt("%.5f", c.dist[2]) << ", p2 " << fmt("%.5f", c.dist[3])
-      << ", k3 " << fmt("%.4f", c.dist[4]) << "\n";
+    s << label << " fx " << fmt_num("%.2f", c.fx()) << " ± " << fmt_num("%.2f", sd[0]) << ", fy " << fmt_num("%.2f", c.fy())
+      << " ± " << fmt_num("%.2f", sd[1]) << ", cx " << fmt_num("%.2f", c.cx()) << " ± " << fmt_num("%.2f", sd[2]) << ", cy "
+      << fmt_num("%.2f", c.cy()) << " ± " << fmt_num("%.2f", sd[3]) << " px; k1 " << fmt_num("%.4f", c.dist[0]) << ", k2 "
+      << fmt_num("%.4f", c.dist[1]) << ", p1 " << fmt_num("%.5f", c.dist[2]) << ", p2 " << fmt_num("%.5f", c.dist[3])
+      << ", k3 " << fmt_num("%.4f", c.dist[4]) << "\n";
   };
   cam("left: ", left);
   cam("right:", right);
@@ -286,14 +286,14 @@ std::string StereoCalibration::describe() const {
   const cv::Vec3d c_right_in_left = -(Rt * t_rightcam_leftcam_m);
   cv::Vec3d rvec;
   cv::Rodrigues(R_rightcam_leftcam, rvec);
-  s << "right camera in the left camera frame: (" << fmt("%.2f", c_right_in_left[0] * 1e3) << ", "
-    << fmt("%.2f", c_right_in_left[1] * 1e3) << ", " << fmt("%.2f", c_right_in_left[2] * 1e3)
-    << ") mm, rotated " << fmt("%.3f", cv::norm(rvec) * 180.0 / M_PI) << " deg; baseline "
-    << fmt("%.3f", baseline_m() * 1e3) << " mm\n";
+  s << "right camera in the left camera frame: (" << fmt_num("%.2f", c_right_in_left[0] * 1e3) << ", "
+    << fmt_num("%.2f", c_right_in_left[1] * 1e3) << ", " << fmt_num("%.2f", c_right_in_left[2] * 1e3)
+    << ") mm, rotated " << fmt_num("%.3f", cv::norm(rvec) * 180.0 / M_PI) << " deg; baseline "
+    << fmt_num("%.3f", baseline_m() * 1e3) << " mm\n";
   const PinholeCamera rc = rectified_camera();
-  s << "rectified (alpha " << fmt("%g", alpha) << "): fx " << fmt("%.3f", rc.fx_px) << ", fy "
-    << fmt("%.3f", rc.fy_px) << ", cx " << fmt("%.3f", rc.cx_px) << ", cy " << fmt("%.3f", rc.cy_px) << " px ("
-    << fmt("%.1f", rc.hfov_rad() * 180.0 / M_PI) << " x " << fmt("%.1f", rc.vfov_rad() * 180.0 / M_PI)
+  s << "rectified (alpha " << fmt_num("%g", alpha) << "): fx " << fmt_num("%.3f", rc.fx_px) << ", fy "
+    << fmt_num("%.3f", rc.fy_px) << ", cx " << fmt_num("%.3f", rc.cx_px) << ", cy " << fmt_num("%.3f", rc.cy_px) << " px ("
+    << fmt_num("%.1f", rc.hfov_rad() * 180.0 / M_PI) << " x " << fmt_num("%.1f", rc.vfov_rad() * 180.0 / M_PI)
     << " deg); valid pixels left " << valid_roi_left.width << "x" << valid_roi_left.height << " at ("
     << valid_roi_left.x << ", " << valid_roi_left.y << "), right " << valid_roi_right.width << "x"
     << valid_roi_right.height << " at (" << valid_roi_right.x << ", " << valid_roi_right.y << ")\n";
@@ -305,8 +305,8 @@ std::string StereoCalibration::describe() const {
          "them and calibrate again):";
     for (const auto& p : pairs) {
       if (p.outlier) {
-        s << "\n  " << p.name << ": left " << fmt("%.3f", p.rms_left_px) << " px, right "
-          << fmt("%.3f", p.rms_right_px) << " px";
+        s << "\n  " << p.name << ": left " << fmt_num("%.3f", p.rms_left_px) << " px, right "
+          << fmt_num("%.3f", p.rms_right_px) << " px";
       }
     }
   }
@@ -445,14 +445,14 @@ Result<StereoCalibration> calibrate_stereo(const std::vector<BoardDetection>& de
     const cv::Vec3d c_right = -(cal.R_rightcam_leftcam.t() * cal.t_rightcam_leftcam_m);
     if (std::abs(c_right[1]) > std::abs(c_right[0])) {
       return make_error(Errc::unsupported,
-                        "the right camera is " + fmt("%.1f", c_right[1] * 1e3) +
-                            " mm below/above the left one but only " + fmt("%.1f", c_right[0] * 1e3) +
+                        "the right camera is " + fmt_num("%.1f", c_right[1] * 1e3) +
+                            " mm below/above the left one but only " + fmt_num("%.1f", c_right[0] * 1e3) +
                             " mm beside it: VIST needs cameras side by side (a horizontal baseline); check the "
                             "camera mounting and that left and right images are not from the same camera");
     }
     if (c_right[0] <= 0.0) {
       return make_error(Errc::invalid_argument,
-                        "the 'right' camera is " + fmt("%.1f", -c_right[0] * 1e3) +
+                        "the 'right' camera is " + fmt_num("%.1f", -c_right[0] * 1e3) +
                             " mm to the LEFT of the 'left' camera: left and right are swapped (for side-by-side "
                             "images the left half must be the left camera, as seen from behind the camera); swap "
                             "them and calibrate again");
@@ -834,7 +834,7 @@ std::string rig_toml_snippet(const StereoRig& rig) {
   // Three decimals: a thousandth of a pixel or of a millimetre is far below
   // any calibration's uncertainty, and the table stays readable.
   auto fixed3 = [](double v) {
-    std::string t = fmt("%.3f", v);
+    std::string t = fmt_num("%.3f", v);
     while (t.size() > 2 && t.back() == '0' && t[t.size() - 2] != '.') t.pop_back();
     return t;
   };

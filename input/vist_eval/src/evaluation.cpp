@@ -17,8 +17,8 @@
 namespace proprio::vist_eval {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+using WallClock = std::chrono::steady_clock;
+double seconds_since(WallClock::time_point t0) { return std::chrono::duration<double>(WallClock::now() - t0).count(); }
 
 constexpr std::array<HandJoint, 4> kKeypoints = {HandJoint::palm, HandJoint::thumb_tip, HandJoint::index_tip,
                                                   HandJoint::middle_tip};
@@ -286,7 +286,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
   std::size_t kp_n = 0;
   vist::TimedImuSample ts;
   sim::StereoGroundTruth gt;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
 
   while (imu->next_nominal_time_ns() <= end_ns) {
     const TimeNs tick_ns = imu->next_nominal_time_ns();
@@ -328,7 +328,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     // Deliver what has arrived by now, then the IMU tick.
     for (auto it = in_flight.begin(); it != in_flight.end();) {
       if (it->arrival > tick_ns) break;
-      const auto c0 = Clock::now();
+      const auto c0 = WallClock::now();
       tracker->add_stereo_frame(it->capture, it->frame.cameras[0], it->frame.cameras[1], it->T_world_leftcam);
       tracker_s += seconds_since(c0);
       if (recorder) {
@@ -371,7 +371,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     bool new_pose = false;
     const double tick_s = 1e-9 * static_cast<double>(tick_ns);
     const bool unplugged = spec.challenge == Challenge::imu_unplug && tick_s >= 10.0 && std::fmod(tick_s - 10.0, 15.0) < 1.0;
-    const auto c1 = Clock::now();
+    const auto c1 = WallClock::now();
     for (const auto& r : readings) {
       if (unplugged) break;
       ts.time_ns = r.time_ns;
@@ -522,7 +522,7 @@ Result<TrackSessionResult> track_session(const std::filesystem::path& session, c
       ++res.imu_samples;
       if (!first_imu) first_imu = imu->time_ns;
       last_imu = imu->time_ns;
-      const auto c0 = Clock::now();
+      const auto c0 = WallClock::now();
       const bool fresh = tracker->add_imu(*imu);
       res.tracker_seconds += seconds_since(c0);
       if (!fresh) continue;
@@ -538,7 +538,7 @@ Result<TrackSessionResult> track_session(const std::filesystem::path& session, c
       }
     } else if (auto* f = std::get_if<vist::VistStereoFrame>(&**item)) {
       ++res.stereo_frames;
-      const auto c0 = Clock::now();
+      const auto c0 = WallClock::now();
       tracker->add_stereo_frame(f->capture_time_ns, f->left, f->right, f->T_world_leftcam);
       res.tracker_seconds += seconds_since(c0);
     } else if (auto* gt = std::get_if<vist::VistGroundTruth>(&**item)) {

@@ -153,10 +153,16 @@ class Decoder {
 };
 
 // ---------------------------------------------------------------- helpers
+}  // namespace
+// Named, not anonymous: the readers' and writers' Impls hold one, and in a
+// unity build GCC warns about members of anonymous-namespace types.
+namespace recording_detail {
 struct FileCloser {
   void operator()(std::FILE* f) const noexcept { std::fclose(f); }
 };
-using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+}  // namespace recording_detail
+namespace {
+using FilePtr = std::unique_ptr<std::FILE, recording_detail::FileCloser>;
 
 std::string num(double v) {
   char buf[32];

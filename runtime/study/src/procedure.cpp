@@ -8,7 +8,7 @@
 namespace proprio::study {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kNoValue = std::numeric_limits<double>::quiet_NaN();
 
 Status bad(const std::string& where, const std::string& what) {
   return make_error(Errc::invalid_argument, where + ": " + what);
@@ -153,7 +153,7 @@ ProcedureEstimate Staircase::estimate() const {
   const auto skip = static_cast<std::size_t>(settings_.discard_reversals);
   if (reversals_.size() <= skip) {
     e.threshold = level_;
-    e.sd = kNaN;
+    e.sd = kNoValue;
     return e;
   }
   // Log steps average in log units (a geometric mean).
@@ -166,7 +166,7 @@ ProcedureEstimate Staircase::estimate() const {
   double ss = 0.0;
   for (double v : used) ss += (v - m) * (v - m);
   e.threshold = settings_.log_steps ? std::pow(10.0, m) : m;
-  e.sd = used.size() > 1 ? std::sqrt(ss / static_cast<double>(used.size() - 1)) : kNaN;
+  e.sd = used.size() > 1 ? std::sqrt(ss / static_cast<double>(used.size() - 1)) : kNoValue;
   return e;
 }
 
@@ -321,7 +321,7 @@ ProcedureEstimate Psi::estimate() const {
   ProcedureEstimate e;
   e.trials = trials_;
   const Result<double> t = threshold_at(settings_.model, m, settings_.target);
-  e.threshold = t ? *t : kNaN;
+  e.threshold = t ? *t : kNoValue;
   // Uncertainty: the posterior SD of alpha, the location.
   double v = 0.0;
   std::size_t c = 0;
@@ -350,7 +350,7 @@ StimulusRequest Interleaved::next(Rng& rng) {
   for (std::size_t i = 0; i < tracks_.size(); ++i) {
     if (!tracks_[i]->finished()) open.push_back(static_cast<int>(i));
   }
-  if (open.empty()) return {kNaN, -1};
+  if (open.empty()) return {kNoValue, -1};
   const int chosen = open[rng.below(open.size())];
   StimulusRequest r = tracks_[static_cast<std::size_t>(chosen)]->next(rng);
   r.track = chosen;
@@ -378,7 +378,7 @@ ProcedureEstimate Interleaved::estimate() const {
     if (std::isfinite(te.threshold)) values.push_back(te.threshold);
   }
   if (values.empty()) {
-    e.threshold = e.sd = kNaN;
+    e.threshold = e.sd = kNoValue;
     return e;
   }
   double m = 0.0;
@@ -386,7 +386,7 @@ ProcedureEstimate Interleaved::estimate() const {
   double ss = 0.0;
   for (double v : values) ss += (v - m) * (v - m);
   e.threshold = m;
-  e.sd = values.size() > 1 ? std::sqrt(ss / static_cast<double>(values.size() - 1)) : kNaN;
+  e.sd = values.size() > 1 ? std::sqrt(ss / static_cast<double>(values.size() - 1)) : kNoValue;
   return e;
 }
 

@@ -19,7 +19,7 @@ namespace {
 
 constexpr double kLn10 = 2.302585092994045684;
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kNaNFit = std::numeric_limits<double>::quiet_NaN();
 
 double standard_normal_cdf(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
 double standard_normal_quantile(double p) {
@@ -563,7 +563,7 @@ double sigmoid(PsychometricModel model, double alpha, double beta, double x) {
     case PsychometricModel::cumulative_normal:
       return standard_normal_cdf(beta * (x - alpha));
   }
-  return kNaN;
+  return kNaNFit;
 }
 
 double sigmoid_derivative(PsychometricModel model, double alpha, double beta, double x) {
@@ -586,7 +586,7 @@ double sigmoid_derivative(PsychometricModel model, double alpha, double beta, do
       return beta * std::exp(-0.5 * z * z) / std::sqrt(2.0 * M_PI);
     }
   }
-  return kNaN;
+  return kNaNFit;
 }
 
 double sigmoid_inverse(PsychometricModel model, double alpha, double beta, double f) {
@@ -596,7 +596,7 @@ double sigmoid_inverse(PsychometricModel model, double alpha, double beta, doubl
     case PsychometricModel::gumbel: return alpha + std::log10(-std::log1p(-f)) / beta;
     case PsychometricModel::cumulative_normal: return alpha + standard_normal_quantile(f) / beta;
   }
-  return kNaN;
+  return kNaNFit;
 }
 
 double psi(PsychometricModel model, const PsychometricParams& p, double x) {
@@ -919,7 +919,7 @@ GoodnessOfFit goodness_from(const std::vector<Replica>& replicas, double observe
     if (r.deviance >= observed_deviance - 1e-9 * (1.0 + observed_deviance)) ++at_least;
   }
   // As Palamedes (PAL_PFML_GoodnessOfFit) and psignifit: the plain fraction.
-  g.p_value = g.simulations > 0 ? static_cast<double>(at_least) / g.simulations : kNaN;
+  g.p_value = g.simulations > 0 ? static_cast<double>(at_least) / g.simulations : kNaNFit;
   return g;
 }
 
@@ -958,7 +958,7 @@ double jackknife_acceleration(const std::vector<double>& values, const std::vect
 }
 
 double quantile_sorted(const std::vector<double>& sorted, double q) {
-  if (std::isnan(q) || sorted.empty()) return kNaN;
+  if (std::isnan(q) || sorted.empty()) return kNaNFit;
   const double h = (static_cast<double>(sorted.size()) - 1.0) * std::clamp(q, 0.0, 1.0);
   const auto lo = static_cast<std::size_t>(std::floor(h));
   const std::size_t hi = std::min(lo + 1, sorted.size() - 1);
@@ -1061,9 +1061,9 @@ Result<BootstrapResult> bootstrap_psychometric(const std::vector<StimulusLevel>&
     for (double x : v) ss += (x - mean) * (x - mean);
     e.standard_error = std::sqrt(ss / static_cast<double>(v.size() - 1));
     e.percentile = {quantile_sorted(v, tail), quantile_sorted(v, 1.0 - tail)};
-    e.bca = {kNaN, kNaN};
-    e.bias_correction = kNaN;
-    e.acceleration = have_acceleration ? acceleration[k] : kNaN;
+    e.bca = {kNaNFit, kNaNFit};
+    e.bias_correction = kNaNFit;
+    e.acceleration = have_acceleration ? acceleration[k] : kNaNFit;
     if (!have_acceleration) continue;
     // Bias correction: where the estimate falls in its bootstrap distribution
     // (ties count half, so a parameter fixed by the options gets z0 = 0).

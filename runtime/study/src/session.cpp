@@ -79,7 +79,7 @@ Status write_json_atomically(const std::filesystem::path& path, const json& j) {
   return write_file_atomic(path, j.dump(2) + "\n", "session sidecar");
 }
 
-bool is_identifier(const std::string& s) {
+bool is_plain_identifier(const std::string& s) {
   return !s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") ==
                            std::string::npos;
 }
@@ -389,7 +389,7 @@ Session& Session::operator=(Session&&) noexcept = default;
 Session::~Session() = default;
 
 Result<Session> Session::open(const StudyDesign& design, const SessionOptions& options) {
-  if (!is_identifier(options.participant)) {
+  if (!is_plain_identifier(options.participant)) {
     return make_error(Errc::invalid_argument,
                       fmt::format("participant id '{}' must be non-empty and use only letters, digits, '_' and '-'",
                                   options.participant));

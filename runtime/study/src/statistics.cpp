@@ -11,7 +11,7 @@
 namespace proprio::study {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kNaNStat = std::numeric_limits<double>::quiet_NaN();
 
 Status all_finite(const std::vector<double>& x, const std::string& what) {
   for (std::size_t i = 0; i < x.size(); ++i) {
@@ -34,19 +34,19 @@ double round_off_floor(double ss_total, double ss_raw) {
 
 // Upper tail of F(df1, df2) beyond f.
 double f_upper_tail(double f, double df1, double df2) {
-  if (!(f >= 0.0) || std::isinf(f)) return kNaN;
+  if (!(f >= 0.0) || std::isinf(f)) return kNaNStat;
   return boost::math::cdf(boost::math::complement(boost::math::fisher_f_distribution<double>(df1, df2), f));
 }
 
 }  // namespace
 
 double mean(const std::vector<double>& x) {
-  if (x.empty()) return kNaN;
+  if (x.empty()) return kNaNStat;
   return std::accumulate(x.begin(), x.end(), 0.0) / static_cast<double>(x.size());
 }
 
 double sample_sd(const std::vector<double>& x) {
-  if (x.size() < 2) return kNaN;
+  if (x.size() < 2) return kNaNStat;
   const double m = mean(x);
   double ss = 0.0;
   for (double v : x) ss += (v - m) * (v - m);
@@ -93,7 +93,7 @@ Result<OneWayAnova> one_way_anova(const std::vector<std::vector<double>>& groups
     a.testable = false;
     a.not_testable_reason = a.ss_between == 0.0 ? "every value is the same: no variance to test"
                                                 : "no variance within any group: the test needs spread within groups";
-    a.f = a.p = a.eta_squared = kNaN;
+    a.f = a.p = a.eta_squared = kNaNStat;
     return a;
   }
   a.f = (a.ss_between / a.df_between) / (a.ss_within / a.df_within);
@@ -165,7 +165,7 @@ Result<RepeatedMeasuresAnova> repeated_measures_anova(const std::vector<std::vec
             ? "every value is the same: no variance to test"
             : "no error variance: every subject differs between the conditions by exactly the same amounts "
               "(e.g. everyone at ceiling), so F would be infinite or 0/0";
-    a.f = a.p = a.gg_p = a.partial_eta_squared = kNaN;
+    a.f = a.p = a.gg_p = a.partial_eta_squared = kNaNStat;
     a.gg_df_conditions = a.df_conditions;
     a.gg_df_error = a.df_error;
     return a;
@@ -241,7 +241,7 @@ Result<PairedT> paired_t_test(const std::vector<double>& a, const std::vector<do
     t.not_testable_reason = t.mean_difference == 0.0
                                 ? "the two conditions are identical for every subject: nothing to test"
                                 : "every subject differs by exactly the same amount: no spread to test against";
-    t.t = t.p = t.cohen_dz = kNaN;
+    t.t = t.p = t.cohen_dz = kNaNStat;
     t.ci_lower = t.ci_upper = t.mean_difference;
     return t;
   }
@@ -278,7 +278,7 @@ const char* to_string(PAdjust method) noexcept {
 std::vector<double> bonferroni(const std::vector<double>& p) {
   const auto m = static_cast<double>(std::count_if(p.begin(), p.end(), [](double v) { return !std::isnan(v); }));
   std::vector<double> out(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) out[i] = std::isnan(p[i]) ? kNaN : std::min(1.0, p[i] * m);
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = std::isnan(p[i]) ? kNaNStat : std::min(1.0, p[i] * m);
   return out;
 }
 
@@ -289,7 +289,7 @@ std::vector<double> holm(const std::vector<double>& p) {
   }
   const std::size_t m = order.size();
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return p[a] < p[b]; });
-  std::vector<double> out(p.size(), kNaN);
+  std::vector<double> out(p.size(), kNaNStat);
   double running = 0.0;  // adjusted p-values never decrease along the sorted order
   for (std::size_t r = 0; r < m; ++r) {
     running = std::max(running, std::min(1.0, static_cast<double>(m - r) * p[order[r]]));

@@ -1,9 +1,9 @@
 #include "proprio/sim/hand_motion.hpp"
 
-#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 
 namespace proprio::sim {
 

@@ -1,10 +1,10 @@
 #include "proprio/sim/stereo_image_sim.hpp"
 
-#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numbers>
 
 #include <opencv2/imgproc.hpp>
 
@@ -548,12 +548,21 @@ void StereoImageSimulator::build_distractors() {
 }
 
 void StereoImageSimulator::render(const HandPose& hand, const Pose& T_world_head, TimeNs t_ns, StereoImageFrame& out,
-                                  StereoImageTruth* truth) {
+                                  StereoImageTruth* truth, const std::vector<bool>* hidden_markers) {
   const StereoImageSimOptions& o = options_;
   const StereoRig& rig = markers_.rig();
   const PinholeCamera& k = rig.camera;
   StereoGroundTruth& gt = truth ? truth->markers : scratch_truth_;
   const StereoFrame frame = markers_.simulate(hand, T_world_head, t_ns, &gt);
+  if (hidden_markers) {
+    for (std::size_t c = 0; c < 2; ++c) {
+      std::erase_if(gt.cameras[c], [&](const MarkerTruth& mt) {
+        if (mt.marker >= hidden_markers->size() || !(*hidden_markers)[mt.marker]) return false;
+        gt.visibility[c][mt.marker] = MarkerVisibility::occluded;
+        return true;
+      });
+    }
+  }
   out.time_ns = t_ns;
   out.dropped = frame.dropped;
   if (truth) {

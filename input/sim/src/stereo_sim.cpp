@@ -1,9 +1,9 @@
 #include "proprio/sim/stereo_sim.hpp"
 
-#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <numeric>
 
 namespace proprio::sim {

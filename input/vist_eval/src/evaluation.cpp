@@ -17,6 +17,9 @@
 namespace proprio::vist_eval {
 namespace {
 
+// The one glove of a bench run (the same for every subject): its own stream of the run's seed.
+constexpr std::uint64_t kGloveBuildStream = 0x676c6f7665;
+
 using WallClock = std::chrono::steady_clock;
 double seconds_since(WallClock::time_point t0) { return std::chrono::duration<double>(WallClock::now() - t0).count(); }
 
@@ -155,12 +158,6 @@ ErrorSummary summarize(std::vector<float>& e) {
 
 Result<SessionResult> run_session(const ImuGloveDescription& glove, const SessionSpec& spec,
                                   const vist::VistTrackerOptions& base_options) {
-  if (spec.mode == FrameMode::images && spec.challenge != Challenge::none &&
-      spec.challenge != Challenge::dropped_frames && spec.challenge != Challenge::distractors) {
-    return make_error(Errc::unsupported, "VIST evaluation: the " + std::string(to_string(spec.challenge)) +
-                                        " challenge runs only in the detections mode so far (it is applied to "
-                                        "markers and IMU samples by identity, not rendered)");
-  }
   auto subject = sim::sim_subject(spec.subject);
   if (!subject) return subject.error();
   auto shape = subject->shape();
@@ -172,6 +169,11 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
   res.hand_width_m = subject->hand_width_m;
 
   const std::uint64_t seed = mix_seed(spec.seed, static_cast<std::uint64_t>(spec.subject));
+  // The simulators wear the glove as built and as it sits this session; the
+  // tracker reads the drawn description.
+  if (auto st = spec.glove_build.validate(); !st) return st.error();
+  const ImuGloveDescription worn =
+      sim::glove_as_built(glove, *shape, spec.glove_build, mix_seed(spec.seed, kGloveBuildStream), mix_seed(seed, 7));
   sim::HandMotionOptions mo;
   mo.protocol = spec.protocol;
   mo.hand = spec.hand;
@@ -179,14 +181,14 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
   sim::HandMotionGenerator motion(HandModel(*shape), mo);
   sim::HandMotionGenerator truth_motion(HandModel(*shape), mo);  // same motion, sampled separately
 
-  auto imu = sim::ImuSimulator::create(motion, glove.place_imus(*shape, spec.hand), sim::ImuNoiseOptions{},
+  auto imu = sim::ImuSimulator::create(motion, worn.place_imus(*shape, spec.hand), sim::ImuNoiseOptions{},
                                        mix_seed(seed, 2));
   if (!imu) return imu.error();
   sim::StereoSimOptions so;
   so.seed = mix_seed(seed, 3);
   so.pixel_noise_px = spec.pixel_noise_px;
   so.drop_probability = spec.challenge == Challenge::dropped_frames ? 0.1 : 0.0;
-  auto stereo = sim::StereoMarkerSimulator::create(glove, *shape, so);
+  auto stereo = sim::StereoMarkerSimulator::create(worn, *shape, so);
   if (!stereo) return stereo.error();
   // Images mode: the same scene rendered (clutter, distractors, skin,
   // noise) and the blobs found by the OpenCV detector.
@@ -200,7 +202,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     io.visibility.seed = so.seed;
     io.seed = mix_seed(seed, 6);
     io.distractors = spec.challenge == Challenge::distractors ? spec.distractor_count : 0;
-    auto r = sim::StereoImageSimulator::create(glove, *shape, io);
+    auto r = sim::StereoImageSimulator::create(worn, *shape, io);
     if (!r) return r.error();
     renderer.emplace(std::move(*r));
     auto d = vist::MarkerDetector::create(glove.rig.camera);
@@ -248,9 +250,10 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     occlusion_rng.shuffle(idx.begin(), idx.end());
     for (std::size_t i = 0; i < idx.size() / 2; ++i) occluded_half[idx[i]] = true;
   }
+  auto hidden_window = [](double t_s) { return std::fmod(t_s, 10.0) >= 8.0; };  // occlude_half: 2 s of every 10
   auto hidden = [&](double t_s, std::size_t marker) {
     switch (spec.challenge) {
-      case Challenge::occlude_half: return std::fmod(t_s, 10.0) >= 8.0 && occluded_half[marker];
+      case Challenge::occlude_half: return hidden_window(t_s) && occluded_half[marker];
       case Challenge::out_of_view: return t_s >= 9.0 && std::fmod(t_s - 9.0, 12.0) < 3.0;
       default: return false;
     }
@@ -300,7 +303,13 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
       a.arrival = cap + latency_ns;
       a.T_world_leftcam = stereo->T_world_leftcam(mf.T_world_head);
       if (renderer) {
-        renderer->render(mf.pose, mf.T_world_head, cap, images);
+        // The challenges, rendered: the occluded half is not drawn (skin shows
+        // where those markers were); out of view, no hand is in the picture.
+        const double t_s = 1e-9 * static_cast<double>(cap);
+        HandPose shown = mf.pose;
+        if (spec.challenge == Challenge::out_of_view && hidden(t_s, 0)) shown.active = false;
+        const bool occluding = spec.challenge == Challenge::occlude_half && hidden_window(t_s);
+        renderer->render(shown, mf.T_world_head, cap, images, nullptr, occluding ? &occluded_half : nullptr);
         if (images.dropped) continue;
         a.frame.time_ns = cap;
         if (auto st = detector->detect_stereo(images.images[0], images.images[1], a.frame.cameras[0],

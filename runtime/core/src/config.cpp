@@ -152,7 +152,8 @@ Result<std::vector<double>> Config::get_doubles(std::string_view key) const {
     } else {
       return make_error(Errc::invalid_argument, where_in(*impl_, &e) + ": element " + std::to_string(i) + " of '" +
                                                     full_key(*impl_, key) + "' must be a finite number, but it is " +
-                                                    type_name(e));
+                                                    (e.is_floating_point() ? std::string("inf or nan")
+                                                                           : std::string(type_name(e))));
     }
   }
   return out;

@@ -179,6 +179,48 @@ TEST(StereoImageSim, VisibleMarkersAppearAtTheirTruePositionsInTheirHue) {
               max_centroid_err);
 }
 
+TEST(StereoImageSim, HiddenMarkersAreNotDrawnAndTheTruthCallsThemOccluded) {
+  StereoImageSimOptions o = clean_options();
+  o.distractors = 0;  // no marker-coloured disc may show through where a marker was
+  StereoImageSimulator sim = make_sim(o);
+  StereoImageFrame plain, hiding;
+  StereoImageTruth plain_truth, hiding_truth;
+  std::size_t hidden_seen = 0;
+  for (const HandMotionFrame& m : motion_frames(6)) {
+    sim.render(m.pose, m.T_world_head, m.time_ns, plain, &plain_truth);
+    // Hide every other marker the left camera sees unhidden.
+    std::vector<bool> hidden(sim.marker_simulator().markers().size(), false);
+    std::vector<const MarkerImageTruth*> to_hide;
+    for (std::size_t i = 0; i < plain_truth.drawn[0].size(); i += 2) {
+      const MarkerImageTruth& d = plain_truth.drawn[0][i];
+      if (d.visible_fraction() < 0.999 || d.area_px2 < 40.0) continue;
+      hidden[d.marker] = true;
+      to_hide.push_back(&d);
+    }
+    sim.render(m.pose, m.T_world_head, m.time_ns, hiding, &hiding_truth, &hidden);
+    for (std::size_t c = 0; c < 2; ++c) {
+      ASSERT_EQ(hiding_truth.drawn[c].size(), hiding_truth.markers.cameras[c].size());
+      for (const MarkerTruth& mt : hiding_truth.markers.cameras[c]) EXPECT_FALSE(hidden[mt.marker]);
+      for (std::size_t k = 0; k < hidden.size(); ++k) {
+        if (hidden[k] && plain_truth.markers.visibility[c][k] == MarkerVisibility::visible) {
+          EXPECT_EQ(hiding_truth.markers.visibility[c][k], MarkerVisibility::occluded);
+        }
+      }
+    }
+    // Where a hidden marker was, the left image no longer has its hue.
+    for (const MarkerImageTruth* d : to_hide) {
+      const cv::Vec3b was = hsv_full_at(plain.images[0], d->u_px, d->v_px);
+      const cv::Vec3b now = hsv_full_at(hiding.images[0], d->u_px, d->v_px);
+      EXPECT_LE(hue_distance(was[0], d->hue_code), 2);
+      // Skin, or the wall where the capsules do not reach: never the marker's saturated hue.
+      EXPECT_FALSE(hue_distance(now[0], d->hue_code) <= 3 && now[1] > 150)
+          << "marker " << d->marker << " still drawn (hue " << int(now[0]) << ", saturation " << int(now[1]) << ")";
+      ++hidden_seen;
+    }
+  }
+  EXPECT_GT(hidden_seen, 10u);
+}
+
 TEST(StereoImageSim, TheHandCoversTheBackgroundWithSkin) {
   StereoImageSimOptions o = clean_options();
   StereoImageSimulator sim = make_sim(o);

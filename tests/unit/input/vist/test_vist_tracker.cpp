@@ -20,9 +20,12 @@ vist_eval::SessionResult run(vist_eval::SessionSpec spec) {
   return r ? *r : vist_eval::SessionResult{};
 }
 
+// The tracker's own accuracy, on the glove exactly as drawn: what is left is
+// the tracker's error, not the glove's (GloveAsBuiltCostsAccuracy below).
 TEST(VistTracker, FreeMotionOfTwoSubjectsIsAccurate) {
   for (int subject : {2, 12}) {
     vist_eval::SessionSpec spec;
+    spec.glove_build = sim::GloveBuildErrors::as_drawn();
     spec.subject = subject;
     spec.duration_s = 20.0;
     spec.calibration_check_s = 18.0;
@@ -39,8 +42,28 @@ TEST(VistTracker, FreeMotionOfTwoSubjectsIsAccurate) {
   }
 }
 
+// The glove as built: markers off their drawn places cost accuracy the
+// tracker cannot remove (it reads the drawn file). The 6 mm target is
+// missed there (docs/benchmarks.md); this bounds the regression and checks the
+// effect is real.
+TEST(VistTracker, GloveAsBuiltCostsAccuracy) {
+  vist_eval::SessionSpec spec;
+  spec.subject = 2;
+  spec.duration_s = 20.0;
+  const auto built = run(spec);
+  spec.glove_build = sim::GloveBuildErrors::as_drawn();
+  const auto drawn = run(spec);
+  ASSERT_TRUE(built.acquired);
+  EXPECT_GT(built.keypoints.mean_mm, 1.5 * drawn.keypoints.mean_mm);
+  EXPECT_LT(built.keypoints.mean_mm, 15.0);
+  EXPECT_GT(built.keypoints.pck20, 0.9);
+}
+
+// Recovery is judged against 10 mm, so on the glove as drawn (as built, the
+// steady error is near that).
 TEST(VistTracker, RecoversAfterTheHandLeavesTheView) {
   vist_eval::SessionSpec spec;
+  spec.glove_build = sim::GloveBuildErrors::as_drawn();
   spec.subject = 5;
   spec.duration_s = 34.0;
   spec.challenge = vist_eval::Challenge::out_of_view;

@@ -97,6 +97,14 @@ TEST(Config, ArrayWithANonNumberPointsAtTheElement) {
   EXPECT_TRUE(contains(v.error().message, "element 1")) << v.error().message;
 }
 
+TEST(Config, ArrayWithInfOrNanSaysSo) {
+  for (const char* text : {"v = [1.0, inf]\n", "v = [nan, 2.0]\n"}) {
+    auto v = parse_ok(text).get_doubles("v");
+    ASSERT_FALSE(v.ok()) << text;
+    EXPECT_TRUE(contains(v.error().message, "must be a finite number, but it is inf or nan")) << v.error().message;
+  }
+}
+
 TEST(Config, ArrayOfTables) {
   const Config c = parse_ok("[[marker]]\nhue = \"red\"\n[[marker]]\nhue = 3\n");
   auto markers = c.tables("marker");

@@ -196,8 +196,11 @@ class StereoImageSimulator {
   // Renders one stereo frame into `out` (its Mats are reused when they have
   // the right size and type) and fills `truth` when given. Not thread-safe:
   // it keeps scratch buffers between calls (one simulator per thread).
+  // hidden_markers (per marker, as markers()): markers covered by something
+  // the scene does not model (a hand-held object, the other hand); they are
+  // not drawn, the skin under them is, and the truth calls them occluded.
   void render(const HandPose& hand_in_world, const Pose& T_world_head, TimeNs t_ns, StereoImageFrame& out,
-              StereoImageTruth* truth = nullptr);
+              StereoImageTruth* truth = nullptr, const std::vector<bool>* hidden_markers = nullptr);
 
   const StereoMarkerSimulator& marker_simulator() const noexcept { return markers_; }
   const StereoImageSimOptions& options() const noexcept { return options_; }

@@ -18,6 +18,7 @@
 
 #include "proprio/glove_descriptions/imu_glove_description.hpp"
 #include "proprio/core/result.hpp"
+#include "proprio/sim/glove_as_built.hpp"
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/vist/vist_session.hpp"
 #include "proprio/vist/vist_tracker.hpp"
@@ -57,6 +58,10 @@ struct SessionSpec {
   double warmup_s = 5.0;            // not scored: acquisition and first calibration
   double pixel_noise_px = 0.3;
   int distractor_count = 20;
+  // The glove the simulators wear: built and donned with errors against the
+  // description the tracker reads (sim/glove_as_built.hpp). One glove per seed;
+  // each session (subject) is a donning. as_drawn() for the idealised glove.
+  sim::GloveBuildErrors glove_build;
   // Calibration accuracy is read at this time (the issue: "after 30 s").
   double calibration_check_s = 30.0;
   // When set, the session is also recorded there (vist_session.hpp): the

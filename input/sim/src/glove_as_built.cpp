@@ -97,10 +97,9 @@ ImuGloveDescription glove_as_built(const ImuGloveDescription& drawn, const HandS
     const Shift g = draw_shift(glove_rng, errors.per_glove_m);
     const Shift& d = donning[u.segment];
     const Shift total{g.along_m + d.along_m, g.across_m + d.across_m};
-    // IMUs sit on the back of the bone (no around angle in the format): only the along part moves them there.
-    double unused_around = 0.0;
-    move(u.segment, u.along_fraction, u.segment == HandJoint::wrist ? u.across_fraction : unused_around,
-         false, total);
+    // IMUs sit on the back of a finger bone (the format has no around angle
+    // for them): there only the along part moves them; `move` leaves `across` alone.
+    move(u.segment, u.along_fraction, u.across_fraction, false, total);
   }
   return built;
 }

@@ -251,10 +251,11 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     for (std::size_t i = 0; i < idx.size() / 2; ++i) occluded_half[idx[i]] = true;
   }
   auto hidden_window = [](double t_s) { return std::fmod(t_s, 10.0) >= 8.0; };  // occlude_half: 2 s of every 10
+  auto out_of_view_window = [](double t_s) { return t_s >= 9.0 && std::fmod(t_s - 9.0, 12.0) < 3.0; };
   auto hidden = [&](double t_s, std::size_t marker) {
     switch (spec.challenge) {
       case Challenge::occlude_half: return hidden_window(t_s) && occluded_half[marker];
-      case Challenge::out_of_view: return t_s >= 9.0 && std::fmod(t_s - 9.0, 12.0) < 3.0;
+      case Challenge::out_of_view: return out_of_view_window(t_s);
       default: return false;
     }
   };
@@ -307,7 +308,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
         // where those markers were); out of view, no hand is in the picture.
         const double t_s = 1e-9 * static_cast<double>(cap);
         HandPose shown = mf.pose;
-        if (spec.challenge == Challenge::out_of_view && hidden(t_s, 0)) shown.active = false;
+        if (spec.challenge == Challenge::out_of_view && out_of_view_window(t_s)) shown.active = false;
         const bool occluding = spec.challenge == Challenge::occlude_half && hidden_window(t_s);
         renderer->render(shown, mf.T_world_head, cap, images, nullptr, occluding ? &occluded_half : nullptr);
         if (images.dropped) continue;

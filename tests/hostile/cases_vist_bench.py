@@ -37,3 +37,10 @@ def _(t):
     t.run("bench", "vist", "--suite", "challenges", "--subjects", "1", "--glove", looking_up,
           "--challenge-minutes", "0.1", "--threads", "2", timeout=300).expect(
         rc=1, out=r"occlude_half\s+did not run: nothing was scored")
+
+
+@case("bench vist --without: an unknown simulator effect is refused by name before anything runs")
+def _(t):
+    r = t.run("bench", "vist", "--suite", "free", "--subjects", "1", "--without", "wobble,gremlins", timeout=60)
+    r.expect(rc={1, 2}, err=r"gremlins")
+    assert "VIST on simulated subjects" not in r.out, r.out

@@ -369,8 +369,8 @@ void add_glove_command(CLI::App& app, int& exit_code) {
   emu_cmd->add_option("--subject", emu->subject, "Simulated subject 0-14")
       ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
       ->capture_default_str();
-  emu_cmd->add_option("--protocol", emu->protocol, "Hand motion: free-motion, pinch-grasp or wrist-sweep")
-      ->check(CLI::IsMember({"free-motion", "pinch-grasp", "wrist-sweep"}))
+  emu_cmd->add_option("--protocol", emu->protocol, "Hand motion (see proprio sim-hand --help)")
+      ->check(CLI::IsMember(sim::motion_protocol_names()))
       ->capture_default_str();
   emu_cmd->add_option("--hand", emu->hand, "Which hand")->check(CLI::IsMember({"left", "right"}))->capture_default_str();
   emu_cmd->add_option("--rate", emu->rate_hz, "IMU sample rate, Hz")

@@ -106,8 +106,10 @@ void add_sim_hand_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--protocol", args->protocol,
                   "free-motion: new random target pose every 3 s (Lee 2021, 4.6); "
-                  "pinch-grasp: pinch, tripod and power grasp; wrist-sweep: wrist moves through the view")
-      ->check(CLI::IsMember({"free-motion", "pinch-grasp", "wrist-sweep"}))
+                  "pinch-grasp: pinch, tripod and power grasp; wrist-sweep: wrist moves through the view; "
+                  "natural: continuous overlapping movements with tremor and flicks; tapping: a finger taps a table; "
+                  "pinch-grasp-contact: pinch-grasp with contact stops")
+      ->check(CLI::IsMember(sim::motion_protocol_names()))
       ->capture_default_str();
   cmd->add_option("--seconds", args->seconds, "Duration to simulate, s")
       ->check(CLI::Range(0.0, 24.0 * 3600.0))

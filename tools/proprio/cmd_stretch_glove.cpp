@@ -43,6 +43,8 @@ struct BenchGloveArgs {
   double exploration_s = 60.0;
   std::uint64_t seed = 1;
   int threads = 0;
+  std::vector<std::string> without;  // simulator effects off in every case
+  bool realism_ablation = false;     // every effect on, each off in turn, all off
   bool json = false;
 };
 
@@ -52,21 +54,51 @@ int run_bench_glove(const BenchGloveArgs& a) {
     std::fprintf(stderr, "error: %s\n", layout.error().message.c_str());
     return 1;
   }
+  using stretch_glove_eval::GloveRealismEffect;
+  std::vector<GloveRealismEffect> off;
+  for (const std::string& w : a.without) {
+    auto e = stretch_glove_eval::parse_glove_realism_effect(w);
+    if (!e) return std::fprintf(stderr, "error: --without: '%s' is not a simulator effect\n", w.c_str()), 2;
+    off.push_back(*e);
+  }
+  // The simulator variants: one (with --without), or the realism ablation.
+  struct Variant {
+    std::string name;
+    std::vector<GloveRealismEffect> off;
+  };
+  std::vector<Variant> variants;
+  if (a.realism_ablation) {
+    variants.push_back({"all effects", off});
+    for (auto e : stretch_glove_eval::kGloveRealismEffects) {
+      if (std::find(off.begin(), off.end(), e) != off.end()) continue;
+      auto v = off;
+      v.push_back(e);
+      variants.push_back({"without " + std::string(to_string(e)), v});
+    }
+    variants.push_back({"ideal glove", {stretch_glove_eval::kGloveRealismEffects.begin(),
+                                        stretch_glove_eval::kGloveRealismEffects.end()}});
+  } else {
+    variants.push_back({"", off});
+  }
   struct Job {
     stretch_glove_eval::GloveSessionSpec spec;
+    std::size_t variant = 0;
   };
   std::vector<Job> jobs;
   std::vector<stretch_glove_eval::CalibrationMode> modes = {stretch_glove_eval::CalibrationMode::session};
   if (!a.global_model.empty()) modes.push_back(stretch_glove_eval::CalibrationMode::global);
-  for (auto mode : modes) {
-    for (int i = 0; i < a.subjects; ++i) {
-      stretch_glove_eval::GloveSessionSpec s;
-      s.subject = stretch_glove_eval::kFirstHeldOutSubject + i;
-      s.task_s = a.minutes * 60.0;
-      s.exploration_s = a.exploration_s;
-      s.seed = a.seed;
-      s.calibration = mode;
-      jobs.push_back({s});
+  for (std::size_t v = 0; v < variants.size(); ++v) {
+    for (auto mode : modes) {
+      for (int i = 0; i < a.subjects; ++i) {
+        stretch_glove_eval::GloveSessionSpec s;
+        s.subject = stretch_glove_eval::kFirstHeldOutSubject + i;
+        s.task_s = a.minutes * 60.0;
+        s.exploration_s = a.exploration_s;
+        s.seed = a.seed;
+        s.calibration = mode;
+        for (auto e : variants[v].off) s.switch_off(e);
+        jobs.push_back({s, v});
+      }
     }
   }
   const unsigned threads = a.threads > 0 ? static_cast<unsigned>(a.threads)
@@ -102,13 +134,20 @@ int run_bench_glove(const BenchGloveArgs& a) {
   if (!a.json) {
     std::printf("\nStretch glove on held-out simulated subjects (%d..%d), %.1f min of free motion each\n",
                 stretch_glove_eval::kFirstHeldOutSubject, stretch_glove_eval::kFirstHeldOutSubject + a.subjects - 1, a.minutes);
-    std::printf("%-28s %8s %10s %10s %12s\n", "calibration", "mean deg", "p95 deg", "1€ mean", "us/frame");
+    if (!off.empty() && !a.realism_ablation) {
+      std::printf("simulator effects off:");
+      for (auto e : off) std::printf(" %s", std::string(to_string(e)).c_str());
+      std::printf("\n");
+    }
+    std::printf("%-40s %8s %10s %10s %12s\n", "calibration", "mean deg", "p95 deg", "1€ mean", "us/frame");
   }
-  for (auto mode : modes) {
+  for (std::size_t c = 0; c < variants.size() * modes.size(); ++c) {
+    const std::size_t v = c / modes.size();
+    const auto mode = modes[c % modes.size()];
     std::vector<stretch_glove_eval::GloveSessionResult> ok;
     nlohmann::json per_subject = nlohmann::json::array();
     for (std::size_t j = 0; j < jobs.size(); ++j) {
-      if (jobs[j].spec.calibration != mode) continue;
+      if (jobs[j].spec.calibration != mode || jobs[j].variant != v) continue;
       if (!results[j]) {
         ++failures;
         std::fprintf(stderr, "subject %d (%s): %s\n", jobs[j].spec.subject, std::string(to_string(mode)).c_str(),
@@ -127,7 +166,10 @@ int run_bench_glove(const BenchGloveArgs& a) {
     for (std::size_t d = 0; d < kHandDofCount; ++d) {
       dofs[std::string(to_string(static_cast<HandDof>(d)))] = agg.dof_mean_deg[d];
     }
+    nlohmann::json effects_off = nlohmann::json::array();
+    for (auto e : variants[v].off) effects_off.push_back(std::string(to_string(e)));
     out["cases"].push_back({{"calibration", std::string(to_string(mode))},
+                            {"simulator_effects_off", effects_off},
                             {"sessions", agg.sessions},
                             {"frames", agg.frames},
                             {"mean_deg", agg.mean_deg},
@@ -137,8 +179,10 @@ int run_bench_glove(const BenchGloveArgs& a) {
                             {"per_dof_mean_deg", dofs},
                             {"per_subject", per_subject}});
     if (!a.json) {
-      std::printf("%-28s %8.2f %10.2f %10.2f %12.1f\n", std::string(to_string(mode)).c_str(), agg.mean_deg,
-                  agg.p95_deg, agg.filtered_mean_deg, agg.pipeline_us_per_frame);
+      std::string name(to_string(mode));
+      if (!variants[v].name.empty()) name += ", " + variants[v].name;
+      std::printf("%-40s %8.2f %10.2f %10.2f %12.1f\n", name.c_str(), agg.mean_deg, agg.p95_deg,
+                  agg.filtered_mean_deg, agg.pipeline_us_per_frame);
     }
   }
   if (a.json) std::printf("%s\n", out.dump(2).c_str());
@@ -375,6 +419,14 @@ void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   g->add_option("--seed", args->seed, "seed (1: the glove the shipped model was trained on)")->capture_default_str();
   g->add_option("--threads", args->threads, "sessions in parallel (0: one per core)")->capture_default_str();
+  std::vector<std::string> glove_effects;
+  for (auto e : stretch_glove_eval::kGloveRealismEffects) glove_effects.emplace_back(to_string(e));
+  g->add_option("--without", args->without,
+                "switch these simulator effects off (comma-separated): " + CLI::detail::join(glove_effects))
+      ->delimiter(',')
+      ->check(CLI::IsMember(glove_effects));
+  g->add_flag("--realism-ablation", args->realism_ablation,
+              "score every simulator effect on, each off in turn, and all off (the ideal glove)");
   g->add_flag("--json", args->json, "print the metrics as JSON");
   g->callback([args, &exit_code] { exit_code = run_bench_glove(*args); });
 

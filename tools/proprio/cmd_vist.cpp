@@ -37,7 +37,8 @@ struct BenchVistArgs {
   std::string suite = "all";
   std::string glove;
   int threads = 0;
-  bool glove_as_drawn = false;
+  std::vector<std::string> without;  // realism effects switched off in every case
+  bool idealised = false;            // every realism effect off: the first wave's simulator
   bool json = false;
 };
 
@@ -78,7 +79,17 @@ struct Case {
   Challenge challenge;
   Ablation ablation;
   double minutes;
+  std::vector<vist_eval::RealismEffect> off;  // on top of --without
 };
+
+// "all effects on" or "without sliding, wobble".
+std::string describe_realism(const std::vector<vist_eval::RealismEffect>& off) {
+  if (off.empty()) return "every realism effect on";
+  if (off.size() == vist_eval::kRealismEffects.size()) return "idealised (every realism effect off)";
+  std::string s = "without ";
+  for (std::size_t i = 0; i < off.size(); ++i) s += (i ? ", " : "") + std::string(vist_eval::to_string(off[i]));
+  return s;
+}
 
 int run_bench_vist(const BenchVistArgs& a) {
   auto mode = vist_eval::parse_frame_mode(a.mode);
@@ -88,18 +99,42 @@ int run_bench_vist(const BenchVistArgs& a) {
     if (!g) return logger().error("{}", g.error().message), 1;
     glove = std::move(*g);
   }
+  std::vector<vist_eval::RealismEffect> off;
+  for (const std::string& w : a.without) {
+    auto e = vist_eval::parse_realism_effect(w);
+    if (!e) return logger().error("--without: '{}' is not a realism effect", w), 2;
+    if (std::find(off.begin(), off.end(), *e) == off.end()) off.push_back(*e);
+  }
+  if (a.idealised) off.assign(vist_eval::kRealismEffects.begin(), vist_eval::kRealismEffects.end());
   std::vector<Case> cases;
   const bool all = a.suite == "all";
-  if (all || a.suite == "free") cases.push_back({"free_motion", Challenge::none, Ablation::full, a.minutes});
+  if (all || a.suite == "free") {
+    const bool natural = std::find(off.begin(), off.end(), vist_eval::RealismEffect::natural_motion) == off.end();
+    cases.push_back({natural ? "natural_motion" : "free_motion", Challenge::none, Ablation::full, a.minutes, {}});
+  }
+  if (a.suite == "realism") {
+    // The ablation of the simulator's realism: everything on, each effect off
+    // in turn, everything off (the first wave's idealised simulator).
+    cases.push_back({"all_effects", Challenge::none, Ablation::full, a.minutes, {}});
+    for (auto e : vist_eval::kRealismEffects) {
+      if (e == vist_eval::RealismEffect::camera && *mode != vist_eval::FrameMode::images) continue;
+      const bool natural = std::find(off.begin(), off.end(), vist_eval::RealismEffect::natural_motion) == off.end();
+      if ((e == vist_eval::RealismEffect::tremor || e == vist_eval::RealismEffect::flicks) && !natural) continue;
+      if (std::find(off.begin(), off.end(), e) != off.end()) continue;
+      cases.push_back({"without_" + std::string(vist_eval::to_string(e)), Challenge::none, Ablation::full, a.minutes, {e}});
+    }
+    cases.push_back({"idealised", Challenge::none, Ablation::full, a.minutes,
+                     {vist_eval::kRealismEffects.begin(), vist_eval::kRealismEffects.end()}});
+  }
   if (all || a.suite == "challenges") {
     for (auto c : {Challenge::occlude_half, Challenge::out_of_view, Challenge::distractors, Challenge::dropped_frames,
                    Challenge::imu_unplug}) {
-      cases.push_back({std::string(vist_eval::to_string(c)), c, Ablation::full, a.challenge_minutes});
+      cases.push_back({std::string(vist_eval::to_string(c)), c, Ablation::full, a.challenge_minutes, {}});
     }
   }
   if (all || a.suite == "ablations") {
     for (auto b : {Ablation::imu_only, Ablation::vision_only, Ablation::no_imu_priors}) {
-      cases.push_back({"ablation_" + std::string(vist_eval::to_string(b)), Challenge::none, b, a.challenge_minutes});
+      cases.push_back({"ablation_" + std::string(vist_eval::to_string(b)), Challenge::none, b, a.challenge_minutes, {}});
     }
   }
   struct Job {
@@ -118,16 +153,16 @@ int run_bench_vist(const BenchVistArgs& a) {
       spec.challenge = cases[c].challenge;
       spec.ablation = cases[c].ablation;
       spec.mode = *mode;
-      if (a.glove_as_drawn) spec.glove_build = sim::GloveBuildErrors::as_drawn();
+      for (auto e : off) spec.switch_off(e);
+      for (auto e : cases[c].off) spec.switch_off(e);
       jobs.push_back({c, spec});
       total_s += spec.duration_s;
     }
   }
   const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   logger().info("bench vist: {} case(s) x {} subject(s), {:.0f} simulated seconds on {} thread(s), seed {}, {} mode, "
-                "glove {}",
-                cases.size(), a.subjects, total_s, threads, a.seed, a.mode,
-                a.glove_as_drawn ? std::string("as drawn") : "as built (" + sim::GloveBuildErrors{}.describe() + ")");
+                "simulator {}",
+                cases.size(), a.subjects, total_s, threads, a.seed, a.mode, describe_realism(off));
   std::vector<std::vector<vist_eval::SessionResult>> results(cases.size());
   ProgressBar progress("bench vist", total_s, "s simulated");
   double done_s = 0.0;
@@ -175,8 +210,9 @@ int run_bench_vist(const BenchVistArgs& a) {
                         {"mode", a.mode},
                         {"subjects", a.subjects},
                         {"glove", glove.name},
-                        {"glove_build", a.glove_as_drawn ? std::string("as drawn")
-                                                         : sim::GloveBuildErrors{}.describe()},
+                        {"realism", describe_realism(off)},
+                        {"glove_build", sim::GloveBuildErrors{}.describe()},
+                        {"soft_tissue", sim::SoftTissueOptions{}.describe()},
                         {"keypoints", {"dorsum (palm joint)", "thumb_tip", "index_tip", "middle_tip"}},
                         {"warmup_s_not_scored", vist_eval::SessionSpec{}.warmup_s},
                         {"camera_latency_s", vist_eval::SessionSpec{}.camera_latency_s}};
@@ -195,6 +231,14 @@ int run_bench_vist(const BenchVistArgs& a) {
     const auto agg = vist_eval::aggregate(cases[c].name, results[c]);
     nlohmann::json jc = to_json(agg);
     jc["ran"] = true;
+    {
+      auto case_off = off;
+      for (auto e : cases[c].off) {
+        if (std::find(case_off.begin(), case_off.end(), e) == case_off.end()) case_off.push_back(e);
+      }
+      jc["realism_off"] = nlohmann::json::array();
+      for (auto e : case_off) jc["realism_off"].push_back(std::string(vist_eval::to_string(e)));
+    }
     const auto failed = static_cast<std::size_t>(a.subjects) - results[c].size();
     if (failed > 0) {
       jc["sessions_failed"] = failed;
@@ -512,7 +556,7 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
   vist->add_option("--subject", args->first_subject, "with --subjects 1: the subject id (0-14)")
       ->check(CLI::Range(0, sim::kSimSubjectCount - 1))
       ->capture_default_str();
-  vist->add_option("--minutes", args->minutes, "minutes of free motion per subject")
+  vist->add_option("--minutes", args->minutes, "minutes of motion per subject (natural, or free with --without natural_motion)")
       ->check(CLI::Range(0.1, 120.0))
       ->capture_default_str();
   vist->add_option("--challenge-minutes", args->challenge_minutes, "minutes per subject of each challenge and ablation")
@@ -522,14 +566,21 @@ void add_vist_commands(CLI::App& app, int& exit_code) {
   vist->add_option("--mode", args->mode, "detections: simulated blob centroids; images: rendered images + OpenCV detector")
       ->check(CLI::IsMember({"detections", "images"}))
       ->capture_default_str();
-  vist->add_option("--suite", args->suite, "which cases to run")
-      ->check(CLI::IsMember({"all", "free", "challenges", "ablations"}))
+  vist->add_option("--suite", args->suite,
+                   "which cases to run (realism: every simulator effect on, each off in turn, all off)")
+      ->check(CLI::IsMember({"all", "free", "challenges", "ablations", "realism"}))
       ->capture_default_str();
   vist->add_option("--glove", args->glove, "glove description TOML (default: the thesis glove)");
   vist->add_option("--threads", args->threads, "sessions run in parallel (0: one per core)")->capture_default_str();
-  vist->add_flag("--glove-as-drawn", args->glove_as_drawn,
-                 "simulate the glove exactly as its description says (the idealised first-wave figures); by default "
-                 "each marker and IMU is off its drawn place per glove and per donning");
+  std::vector<std::string> effects;
+  for (auto e : vist_eval::kRealismEffects) effects.emplace_back(vist_eval::to_string(e));
+  vist->add_option("--without", args->without,
+                   "switch these simulator effects off in every case (comma-separated): " + CLI::detail::join(effects))
+      ->delimiter(',')
+      ->check(CLI::IsMember(effects));
+  vist->add_flag("--idealised", args->idealised,
+                 "every simulator effect off: the glove as drawn on rigid skin, the idealised camera and the thesis's "
+                 "free-motion protocol (the first wave's figures)");
   vist->add_flag("--json", args->json, "print the metrics as JSON");
   vist->callback([args, &exit_code] { exit_code = run_bench_vist(*args); });
 }

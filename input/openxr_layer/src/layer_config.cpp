@@ -483,8 +483,10 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
     if (!protocol) return protocol.error().with_context(where);
     auto parsed = sim::parse_motion_protocol(*protocol);
     if (!parsed) {
+      std::string allowed;
+      for (const std::string& name : sim::motion_protocol_names()) allowed += (allowed.empty() ? "" : ", ") + name;
       return make_error(Errc::invalid_argument,
-                        where + ": protocol \"" + *protocol + "\" is not one of: free-motion, pinch-grasp, wrist-sweep");
+                        where + ": protocol \"" + printable(*protocol, 80) + "\" is not one of: " + allowed);
     }
     s.protocol = *parsed;
     auto subject = c.get_int_or("subject", 3, 0, 14);
@@ -614,7 +616,7 @@ hands = ["left", "right"]
 space = "view"
 offset_position_m = [0.0, 0.0, 0.0]
 offset_rotation_deg = [0.0, 0.0, 0.0]   # rotation vector (axis * angle), degrees
-protocol = "free-motion"                # free-motion | pinch-grasp | wrist-sweep
+protocol = "free-motion"                # free-motion | pinch-grasp | wrist-sweep | natural | tapping | pinch-grasp-contact
 subject = 3                             # 0-14
 seed = 1
 rate_hz = 90

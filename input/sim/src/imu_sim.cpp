@@ -392,9 +392,14 @@ std::span<const ImuReading> ImuSimulator::next() {
       have_cache = true;
     }
 
-    const Pose T_world_imu_before = before.joint(m.segment) * m.T_segment_imu;
-    const Pose T_world_imu = at.joint(m.segment) * m.T_segment_imu;
-    const Pose T_world_imu_after = after.joint(m.segment) * m.T_segment_imu;
+    // On soft tissue the mount moves on its segment (translation only).
+    auto mount = [&](const HandPose& pose, TimeNs when) {
+      if (!mount_offsets_) return pose.joint(m.segment) * m.T_segment_imu;
+      return pose.joint(m.segment) * Pose{Quat::Identity(), mount_offsets_(i, pose, when)} * m.T_segment_imu;
+    };
+    const Pose T_world_imu_before = mount(before, t - h_ns);
+    const Pose T_world_imu = mount(at, t);
+    const Pose T_world_imu_after = mount(after, t + h_ns);
 
     // Second central difference of the IMU's own position: the acceleration
     // its proof mass feels, lever arm (centripetal, tangential) included.

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <span>
 
 #include <opencv2/imgproc.hpp>
 
@@ -23,7 +24,20 @@ enum : std::uint64_t {
   kMarkerLookStream,
   kExposureStream,
   kNoiseStream,  // + camera index
+  // Camera realism (clear of kNoiseStream + camera index).
+  kLensStream = 0x51b0,
+  kColourCastStream,
+  kGradientStream,
+  kGlossStream,
 };
+
+// The exposure and light level at which sensor_gain_dn_per_e and
+// pixel_noise_dn are given (StereoImageSimOptions::gain_ratio()).
+constexpr double kReferenceExposureS = 0.004;
+// Motion blur: sub-exposure positions of a marker at most this far apart in
+// the image (pixels; each is 4x4 anti-aliased at its edge), and at most this many.
+constexpr double kBlurStepPx = 0.5;
+constexpr int kMaxBlurSteps = 64;
 
 // The rigid body a segment moves with: the non-thumb metacarpals are rigid
 // with the wrist in the hand model (as in stereo_sim.cpp, where it is private).
@@ -215,6 +229,147 @@ DiscCoverage draw_disc(cv::Mat& img, const CameraView& cam, const Vec3& c, const
   return cov;
 }
 
+// One position of a marker over its exposure: centre and unit normal in the
+// camera frame, diffuse colour and its share of the exposure.
+struct MarkerPose {
+  Vec3 c = Vec3::Zero();
+  Vec3 n = Vec3::UnitZ();
+  cv::Vec3d bgr;
+  double weight = 1.0;
+};
+
+// A Blinn-Phong highlight on a domed marker: light direction (unit, camera
+// frame), peak strength (fraction of full scale; 0: none), shininess and the
+// dome's sphere radius (>= the disc's radius).
+struct MarkerGloss {
+  Vec3 light = Vec3::UnitZ();
+  double strength = 0.0;
+  double shininess = 1.0;
+  double dome_radius = 1.0;
+};
+
+// Draws a marker disc as draw_disc does, but integrated over the exposure:
+// coverage and colour are accumulated over its poses (weights summing to 1)
+// in `acc`, then blended into the image once, so a moving marker leaves a
+// smear of partial coverage. With one pose of weight 1 and no gloss it draws
+// exactly what draw_disc draws. hidden(x, y, z) as for draw_disc (only what
+// was drawn before this marker); on_drawn(x, y, z_nearest, coverage) for each
+// pixel drawn, after blending. *peak gets the strongest specular term drawn.
+template <class Hidden, class OnDrawn>
+DiscCoverage draw_marker(cv::Mat& img, const CameraView& cam, std::span<const MarkerPose> poses, double r,
+                         const MarkerGloss& gloss, std::vector<double>& acc, double& peak, const Hidden& hidden,
+                         const OnDrawn& on_drawn) {
+  DiscCoverage cov;
+  peak = 0.0;
+  PixelBox all;
+  bool any = false;
+  for (const MarkerPose& mp : poses) {
+    const PixelBox b = project_box(cam, mp.c - Vec3::Constant(r), mp.c + Vec3::Constant(r));
+    if (b.empty()) continue;
+    if (!any) {
+      all = b;
+      any = true;
+    } else {
+      all.u0 = std::min(all.u0, b.u0);
+      all.v0 = std::min(all.v0, b.v0);
+      all.u1 = std::max(all.u1, b.u1);
+      all.v1 = std::max(all.v1, b.v1);
+    }
+  }
+  if (!any) return cov;
+  const int bw = all.u1 - all.u0 + 1;
+  const int bh = all.v1 - all.v0 + 1;
+  constexpr int kStride = 5;  // coverage, b, g, r, nearest depth
+  acc.assign(static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh) * kStride, 0.0);
+  for (std::size_t i = 4; i < acc.size(); i += kStride) acc[i] = std::numeric_limits<double>::infinity();
+  const double inv_f = std::max(1.0 / cam.fx, 1.0 / cam.fy);
+  const double r2 = r * r;
+  const double dome2 = gloss.dome_radius * gloss.dome_radius;
+  for (const MarkerPose& mp : poses) {
+    const PixelBox box = project_box(cam, mp.c - Vec3::Constant(r), mp.c + Vec3::Constant(r));
+    if (box.empty()) continue;
+    const Vec3& c = mp.c;
+    const Vec3& n = mp.n;
+    const double w = mp.weight;
+    const double n_dot_c = n.dot(c);
+    const bool lit = gloss.strength > 0.0 && n.dot(gloss.light) > 0.0;
+    for (int y = box.v0; y <= box.v1; ++y) {
+      double* arow = acc.data() + static_cast<std::size_t>(y - all.v0) * bw * kStride;
+      for (int x = box.u0; x <= box.u1; ++x) {
+        const Vec3 d = cam.ray(x, y);
+        const double denom = n.dot(d);
+        if (std::abs(denom) < 1e-9) continue;  // edge-on
+        const double z = n_dot_c / denom;
+        if (!(z > 1e-4)) continue;
+        const double rho = (z * d - c).norm();
+        const double footprint = 0.75 * z * inv_f * d.squaredNorm() / std::abs(denom);
+        double inside = 0.0, off_u = 0.0, off_v = 0.0;
+        if (rho <= r - footprint) {
+          inside = 1.0;
+        } else if (rho >= r + footprint) {
+          continue;
+        } else {
+          int hits = 0;
+          for (int sy = 0; sy < 4; ++sy) {
+            for (int sx = 0; sx < 4; ++sx) {
+              const double ou = -0.375 + 0.25 * sx;
+              const double ov = -0.375 + 0.25 * sy;
+              const Vec3 ds = cam.ray(x + ou, y + ov);
+              const double dn = n.dot(ds);
+              if (std::abs(dn) < 1e-12) continue;
+              if (((n_dot_c / dn) * ds - c).squaredNorm() <= r2) {
+                ++hits;
+                off_u += ou;
+                off_v += ov;
+              }
+            }
+          }
+          if (hits == 0) continue;
+          inside = hits / 16.0;
+          off_u /= hits;
+          off_v /= hits;
+        }
+        const double wi = w * inside;
+        cov.unoccluded += wi;
+        if (hidden(x, y, z)) continue;
+        cov.drawn += wi;
+        cov.su += wi * (x + off_u);
+        cov.sv += wi * (y + off_v);
+        double* a = arow + static_cast<std::size_t>(x - all.u0) * kStride;
+        double spec = 0.0;
+        if (lit) {
+          // The dome over this point of the disc: its normal, and the
+          // bisector of the directions to the light and to the camera.
+          const Vec3 q = z * d;
+          const Vec3 off = q - c;
+          const Vec3 n_dome = (off + n * std::sqrt(std::max(dome2 - off.squaredNorm(), 0.0))).normalized();
+          const Vec3 h = (gloss.light - q.normalized()).normalized();
+          const double nh = n_dome.dot(h);
+          if (nh > 0.0) spec = gloss.strength * std::pow(nh, gloss.shininess);
+          peak = std::max(peak, spec);
+        }
+        a[0] += wi;
+        for (int ch = 0; ch < 3; ++ch) a[1 + ch] += wi * (mp.bgr[ch] + 255.0 * spec);
+        a[4] = std::min(a[4], z);
+      }
+    }
+  }
+  for (int y = all.v0; y <= all.v1; ++y) {
+    auto* row = img.ptr<cv::Vec3b>(y);
+    const double* arow = acc.data() + static_cast<std::size_t>(y - all.v0) * bw * kStride;
+    for (int x = all.u0; x <= all.u1; ++x) {
+      const double* a = arow + static_cast<std::size_t>(x - all.u0) * kStride;
+      if (!(a[0] > 0.0)) continue;
+      cv::Vec3b& px = row[x];
+      for (int ch = 0; ch < 3; ++ch) {
+        px[ch] = cv::saturate_cast<std::uint8_t>((1.0 - a[0]) * px[ch] + a[1 + ch]);
+      }
+      on_drawn(x, y, a[4], a[0]);
+    }
+  }
+  return cov;
+}
+
 // Ray (origin at the camera, unit direction rd) against a capsule: distance
 // along the ray to the first hit and the outward normal there, or false.
 // Inigo Quilez's closed form (https://iquilezles.org/articles/intersectors/).
@@ -318,11 +473,90 @@ Status StereoImageSimOptions::validate() const {
   }
   if (!finite_in(marker_brightness_jitter, 0.0, 0.9)) return bad("marker_brightness_jitter must be in [0, 0.9]");
   if (!finite_in(marker_hue_jitter, 0.0, 20.0)) return bad("marker_hue_jitter must be in [0, 20] (HSV_FULL steps)");
+  // Camera realism.
+  if (!finite_in(exposure_s, 1e-5, 0.1)) return bad("exposure_s must be in [1e-5, 0.1] (seconds)");
+  if (!finite_in(timestamp_in_exposure, 0.0, 1.0)) {
+    return bad("timestamp_in_exposure must be in [0, 1] (0: the stamp is the start of the exposure, 1: its end)");
+  }
+  if (!finite_in(sensor_gain_dn_per_e, 0.0, 10.0))
+    return bad("sensor_gain_dn_per_e must be in [0, 10] (DN per electron)");
+  if (!finite_in(light_level, 0.01, 100.0))
+    return bad("light_level must be in [0.01, 100] (relative to an indoor room)");
+  if (sensor_noise && !(effective_read_noise_dn() <= 64.0 && effective_gain_dn_per_e() <= 10.0)) {
+    return bad(
+        "sensor_noise: pixel_noise_dn and sensor_gain_dn_per_e times gain_ratio() (4 ms / exposure_s / "
+        "light_level) must stay within 64 DN and 10 DN per electron");
+  }
+  if (!finite_in(residual_k1_sigma, 0.0, 0.1)) return bad("residual_k1_sigma must be in [0, 0.1]");
+  if (!finite_in(residual_k2_sigma, 0.0, 0.1)) return bad("residual_k2_sigma must be in [0, 0.1]");
+  if (!finite_in(residual_p_sigma, 0.0, 0.01)) return bad("residual_p_sigma must be in [0, 0.01]");
+  if (!finite_in(vignetting, 0.0, 1.0)) return bad("vignetting must be in [0, 1]");
+  if (!finite_in(illumination_gradient, 0.0, 0.9)) return bad("illumination_gradient must be in [0, 0.9]");
+  if (!finite_in(colour_cast, 0.0, 0.5)) return bad("colour_cast must be in [0, 0.5]");
+  if (!finite_in(specular, 0.0, 4.0)) return bad("specular must be in [0, 4] (fraction of full scale)");
+  if (!finite_in(specular_shininess, 1.0, 100000.0)) return bad("specular_shininess must be in [1, 100000]");
+  if (!finite_in(marker_gloss_spread, 0.0, 1.0)) return bad("marker_gloss_spread must be in [0, 1]");
+  if (!finite_in(marker_dome_radius_m, 1e-4, 10.0)) return bad("marker_dome_radius_m must be in [1e-4, 10] (metres)");
   return Status::success();
 }
 
+void StereoImageSimOptions::switch_off_camera_realism() {
+  motion_blur = false;
+  sensor_noise = false;
+  lens_residual = false;
+  vignetting = 0.0;
+  illumination_gradient = 0.0;
+  colour_cast = 0.0;
+  specular = 0.0;
+}
+
+StereoImageSimOptions StereoImageSimOptions::idealised() {
+  StereoImageSimOptions o;
+  o.switch_off_camera_realism();
+  return o;
+}
+
+Eigen::Vector2d LensResidual::distort_px(const PinholeCamera& k, double u_px, double v_px) const {
+  const double x = (u_px - k.cx_px) / k.fx_px;
+  const double y = (v_px - k.cy_px) / k.fy_px;
+  const double r2 = x * x + y * y;
+  const double radial = 1.0 + k1 * r2 + k2 * r2 * r2;
+  const double xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+  const double yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+  return {k.fx_px * xd + k.cx_px, k.fy_px * yd + k.cy_px};
+}
+
+Eigen::Vector2d LensResidual::undistort_px(const PinholeCamera& k, double u_px, double v_px) const {
+  const double xd = (u_px - k.cx_px) / k.fx_px;
+  const double yd = (v_px - k.cy_px) / k.fy_px;
+  double x = xd, y = yd;
+  for (int it = 0; it < 20; ++it) {
+    const double r2 = x * x + y * y;
+    const double radial = 1.0 + k1 * r2 + k2 * r2 * r2;
+    const double dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    const double dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    const double x_next = (xd - dx) / radial;
+    const double y_next = (yd - dy) / radial;
+    const bool converged = std::abs(x_next - x) + std::abs(y_next - y) < 1e-13;
+    x = x_next;
+    y = y_next;
+    if (converged) break;
+  }
+  return {k.fx_px * x + k.cx_px, k.fy_px * y + k.cy_px};
+}
+
+double LensResidual::corner_shift_px(const PinholeCamera& k) const {
+  double worst = 0.0;
+  for (double u : {0.0, k.width_px - 1.0}) {
+    for (double v : {0.0, k.height_px - 1.0}) {
+      worst = std::max(worst, (distort_px(k, u, v) - Eigen::Vector2d(u, v)).norm());
+    }
+  }
+  return worst;
+}
+
 std::string StereoImageSimOptions::describe() const {
-  char buf[1024];
+  char buf[2048];
   std::snprintf(buf, sizeof buf,
                 "noise=%.2fDN blur=%.2fpx exposure_jitter=%.3f background=%.2fm clutter=%s(%d shapes, %d "
                 "marker-coloured, hue clearance %.0f/%.0f/%.0f/%.0f) distractors=%d(%.0f-%.0fmm) skin_bgr=(%.0f,%.0f,%.0f) "
@@ -333,7 +567,18 @@ std::string StereoImageSimOptions::describe() const {
                 distractor_min_diameter_m * 1e3, distractor_max_diameter_m * 1e3, skin_bgr[0], skin_bgr[1],
                 skin_bgr[2], ambient, marker_saturation, marker_value, marker_brightness_jitter, marker_hue_jitter,
                 static_cast<unsigned long long>(seed), visibility.describe().c_str());
-  return buf;
+  std::string out = buf;
+  std::snprintf(buf, sizeof buf,
+                " camera_realism={motion_blur=%s exposure=%.2fms stamp_in_exposure=%.2f sensor_noise=%s(gain "
+                "%.3fDN/e- light_level %.2f: %.3fDN/e-, read %.2fDN) lens_residual=%s(k1 sigma %.4g, k2 sigma %.4g, p "
+                "sigma %.4g) vignetting=%.2f illumination_gradient=%.2f colour_cast=%.3f specular=%.2f(shininess %.0f, "
+                "gloss spread %.2f, dome %.1fmm)}",
+                motion_blur ? "on" : "off", exposure_s * 1e3, timestamp_in_exposure, sensor_noise ? "on" : "off",
+                sensor_gain_dn_per_e, light_level, effective_gain_dn_per_e(), effective_read_noise_dn(),
+                lens_residual ? "on" : "off", residual_k1_sigma, residual_k2_sigma, residual_p_sigma, vignetting,
+                illumination_gradient, colour_cast, specular, specular_shininess, marker_gloss_spread,
+                marker_dome_radius_m * 1e3);
+  return out + buf;
 }
 
 Result<StereoImageSimulator> StereoImageSimulator::create(const ImuGloveDescription& glove, const HandShape& shape,
@@ -388,6 +633,86 @@ StereoImageSimulator::StereoImageSimulator(StereoMarkerSimulator markers, Stereo
   }
   build_wall();
   build_distractors();
+  build_camera_look();
+}
+
+void StereoImageSimulator::build_camera_look() {
+  const StereoImageSimOptions& o = options_;
+  const PinholeCamera& k = rig().camera;
+  // Per-session draws, each from its own stream and drawn whether or not its
+  // effect is on, so switching one off changes no other.
+  {
+    Rng rng(mix_seed(o.seed, kLensStream));
+    for (LensResidual& lens : look_.lens) {
+      lens.k1 = o.residual_k1_sigma * rng.normal();
+      lens.k2 = o.residual_k2_sigma * rng.normal();
+      lens.p1 = o.residual_p_sigma * rng.normal();
+      lens.p2 = o.residual_p_sigma * rng.normal();
+      if (!o.lens_residual) lens = LensResidual{};
+    }
+  }
+  {
+    Rng rng(mix_seed(o.seed, kColourCastStream));
+    const double b = 1.0 + o.colour_cast * (2.0 * rng.uniform01() - 1.0);
+    const double r = 1.0 + o.colour_cast * (2.0 * rng.uniform01() - 1.0);
+    look_.colour_gain_bgr = {b, 1.0, r};
+  }
+  {
+    Rng rng(mix_seed(o.seed, kGradientStream));
+    look_.gradient_angle_rad = rng.uniform(0.0, 2.0 * std::numbers::pi);
+  }
+  {
+    Rng rng(mix_seed(o.seed, kGlossStream));
+    look_.marker_gloss.clear();
+    for (std::size_t i = 0; i < markers_.markers().size(); ++i) {
+      look_.marker_gloss.push_back(1.0 - o.marker_gloss_spread * rng.uniform01());
+    }
+  }
+
+  // The spatial light factor: vignetting (relative illumination
+  // 1 - v (1 - cos^4 theta), theta off the optical axis) times the gradient.
+  if (o.vignetting > 0.0 || o.illumination_gradient > 0.0) {
+    const double gx = std::cos(look_.gradient_angle_rad) / (0.5 * k.width_px);
+    const double gy = std::sin(look_.gradient_angle_rad) / (0.5 * k.height_px);
+    for (cv::Mat& map : light_map_) {
+      map.create(k.height_px, k.width_px, CV_32F);
+      for (int y = 0; y < k.height_px; ++y) {
+        float* row = map.ptr<float>(y);
+        const double yn = (y - k.cy_px) / k.fy_px;
+        for (int x = 0; x < k.width_px; ++x) {
+          const double xn = (x - k.cx_px) / k.fx_px;
+          const double cos2 = 1.0 / (1.0 + xn * xn + yn * yn);
+          const double vig = 1.0 - o.vignetting * (1.0 - cos2 * cos2);
+          const double ramp = std::max(0.0, 1.0 + o.illumination_gradient * ((x - k.cx_px) * gx + (y - k.cy_px) * gy));
+          row[x] = static_cast<float>(vig * ramp);
+        }
+      }
+    }
+  }
+
+  // The lens residual: each image pixel (distorted) samples the ideal image
+  // where the ideal pinhole put the point it shows.
+  for (std::size_t c = 0; c < 2; ++c) {
+    if (look_.lens[c].zero()) continue;
+    cv::Mat mx(k.height_px, k.width_px, CV_32F), my(k.height_px, k.width_px, CV_32F);
+    for (int y = 0; y < k.height_px; ++y) {
+      float* rx = mx.ptr<float>(y);
+      float* ry = my.ptr<float>(y);
+      for (int x = 0; x < k.width_px; ++x) {
+        const Eigen::Vector2d src = look_.lens[c].undistort_px(k, x, y);
+        rx[x] = static_cast<float>(src.x());
+        ry[x] = static_cast<float>(src.y());
+      }
+    }
+    cv::convertMaps(mx, my, lens_map1_[c], lens_map2_[c], CV_16SC2);
+  }
+
+  // Sensor noise: sigma per 8-bit level, sqrt(K S + read^2) (EMVA 1288).
+  const double gain = o.effective_gain_dn_per_e();
+  const double read = o.effective_read_noise_dn();
+  for (std::size_t i = 0; i < noise_sigma_.size(); ++i) {
+    noise_sigma_[i] = static_cast<float>(std::sqrt(gain * static_cast<double>(i) + read * read));
+  }
 }
 
 void StereoImageSimulator::build_wall() {
@@ -548,12 +873,13 @@ void StereoImageSimulator::build_distractors() {
 }
 
 void StereoImageSimulator::render(const HandPose& hand, const Pose& T_world_head, TimeNs t_ns, StereoImageFrame& out,
-                                  StereoImageTruth* truth, const std::vector<bool>* hidden_markers) {
+                                  StereoImageTruth* truth, const std::vector<bool>* hidden_markers,
+                                  std::span<const Vec3> skin_offsets) {
   const StereoImageSimOptions& o = options_;
   const StereoRig& rig = markers_.rig();
   const PinholeCamera& k = rig.camera;
   StereoGroundTruth& gt = truth ? truth->markers : scratch_truth_;
-  const StereoFrame frame = markers_.simulate(hand, T_world_head, t_ns, &gt);
+  const StereoFrame frame = markers_.simulate(hand, T_world_head, t_ns, &gt, skin_offsets);
   if (hidden_markers) {
     for (std::size_t c = 0; c < 2; ++c) {
       std::erase_if(gt.cameras[c], [&](const MarkerTruth& mt) {
@@ -586,9 +912,26 @@ void StereoImageSimulator::render(const HandPose& hand, const Pose& T_world_head
   if (hand.active) caps = hand_capsules(hand, markers_.options().forearm_length_m);
   std::array<Vec3, HandCapsules::kMax> cap_a{}, cap_b{};
   std::array<std::uint8_t, HandCapsules::kMax> cap_body{};
+  // Motion over the exposure, [t - stamp * exposure, t + (1 - stamp) * exposure]:
+  // a point on a segment moves with the segment's linear and angular
+  // velocity (world frame); the head is taken as still during it.
+  const bool moving = o.motion_blur && hand.active && hand.has_velocity;
+  const double dt_start = -o.timestamp_in_exposure * o.exposure_s;
+  const double dt_mid = moving ? dt_start + 0.5 * o.exposure_s : 0.0;
+  auto velocity_at = [&](HandJoint segment, const Vec3& p_in_world) -> Vec3 {
+    const std::size_t j = index_of(segment);
+    return hand.linear_velocity_in_world[j] +
+           hand.angular_velocity_in_world[j].cross(p_in_world - hand.T_world_joint[j].p);
+  };
   for (std::size_t i = 0; i < caps.count; ++i) {
-    cap_a[i] = T_lc_world * caps.capsules[i].a;
-    cap_b[i] = T_lc_world * caps.capsules[i].b;
+    Vec3 a = caps.capsules[i].a;
+    Vec3 b = caps.capsules[i].b;
+    if (moving) {  // the hand's skin where it is at mid-exposure (not smeared)
+      a += dt_mid * velocity_at(caps.owner[i], caps.capsules[i].a);
+      b += dt_mid * velocity_at(caps.owner[i], caps.capsules[i].b);
+    }
+    cap_a[i] = T_lc_world * a;
+    cap_b[i] = T_lc_world * b;
     cap_body[i] = static_cast<std::uint8_t>(index_of(body_of(caps.owner[i])));
   }
   const bool mirror = hand.hand != markers_.markers_hand();
@@ -596,6 +939,12 @@ void StereoImageSimulator::render(const HandPose& hand, const Pose& T_world_head
     Rng rng(mix_seed(mix_seed(o.seed, kExposureStream), static_cast<std::uint64_t>(t_ns)));
     return 1.0 + o.exposure_jitter * (2.0 * rng.uniform01() - 1.0);
   }();
+  MarkerGloss gloss;
+  gloss.light = light;
+  gloss.strength = o.specular;
+  gloss.shininess = o.specular_shininess;
+  std::array<MarkerPose, kMaxBlurSteps> poses;
+  std::size_t pose_count = 0;
 
   for (std::size_t c = 0; c < 2; ++c) {
     CameraView cam;
@@ -709,10 +1058,38 @@ void StereoImageSimulator::render(const HandPose& hand, const Pose& T_world_head
       const Vec3 p_cam = cam.from_leftcam(mt.p_in_leftcam);
       const std::uint8_t own = static_cast<std::uint8_t>(index_of(body_of(m.segment)));
       const std::uint8_t self = static_cast<std::uint8_t>(kFirstMarkerId + std::min<std::size_t>(mt.marker, 190));
-      const double value = o.marker_value * marker_brightness_[mt.marker] * shade(n_cam);
-      const cv::Vec3d bgr = hsv_full_to_bgr(marker_hue_codes_[mt.marker], o.marker_saturation, value);
-      const DiscCoverage cov = draw_disc(
-          img, cam, p_cam, n_cam, 0.5 * m.diameter_m, bgr,
+      auto colour = [&](const Vec3& normal) {
+        const double value = o.marker_value * marker_brightness_[mt.marker] * shade(normal);
+        return hsv_full_to_bgr(marker_hue_codes_[mt.marker], o.marker_saturation, value);
+      };
+      // Its poses over the exposure: one, at t, when nothing moves; else
+      // enough sub-exposure positions to keep them kBlurStepPx apart.
+      const double r = 0.5 * m.diameter_m;
+      Eigen::Vector2d blur = Eigen::Vector2d::Zero();
+      pose_count = 0;
+      if (!moving) {
+        poses[pose_count++] = {p_cam, n_cam, colour(n_cam), 1.0};
+      } else {
+        const Vec3 v_cam = T_lc_world.q * velocity_at(m.segment, T_world_lc * mt.p_in_leftcam);
+        const Vec3 w_cam = T_lc_world.q * hand.angular_velocity_in_world[index_of(m.segment)];
+        auto project = [&](const Vec3& p) {
+          return Eigen::Vector2d(cam.fx * p.x() / p.z() + cam.cx, cam.fy * p.y() / p.z() + cam.cy);
+        };
+        const Vec3 p0 = p_cam + dt_start * v_cam;
+        const Vec3 p1 = p_cam + (dt_start + o.exposure_s) * v_cam;
+        if (p0.z() > 1e-3 && p1.z() > 1e-3) blur = project(p1) - project(p0);
+        const int steps = std::clamp(static_cast<int>(std::ceil(blur.norm() / kBlurStepPx)), 1, kMaxBlurSteps);
+        for (int s = 0; s < steps; ++s) {
+          const double dt = dt_start + o.exposure_s * (s + 0.5) / steps;
+          const Vec3 n_s = (n_cam + dt * w_cam.cross(n_cam)).normalized();
+          poses[pose_count++] = {p_cam + dt * v_cam, n_s, colour(n_s), 1.0 / steps};
+        }
+      }
+      gloss.strength = o.specular * look_.marker_gloss[mt.marker];
+      gloss.dome_radius = std::max(o.marker_dome_radius_m, r);
+      double peak = 0.0;
+      const DiscCoverage cov = draw_marker(
+          img, cam, std::span<const MarkerPose>(poses.data(), pose_count), r, gloss, marker_acc_, peak,
           [&](int x, int y, double z) {
             const std::uint8_t body = owner_.at<std::uint8_t>(y, x);
             const float zbuf = depth_.at<float>(y, x);
@@ -737,16 +1114,58 @@ void StereoImageSimulator::render(const HandPose& hand, const Pose& T_world_head
         it.unoccluded_area_px2 = cov.unoccluded;
         it.u_drawn_px = cov.drawn > 0.0 ? cov.su / cov.drawn : mt.u_px;
         it.v_drawn_px = cov.drawn > 0.0 ? cov.sv / cov.drawn : mt.v_px;
+        it.normal_in_leftcam = n_cam;
+        it.blur_u_px = blur.x();
+        it.blur_v_px = blur.y();
+        it.highlight = peak;
       }
     }
 
-    // 5. The camera: exposure, optics blur, sensor noise.
-    if (o.exposure_jitter > 0.0) img.convertTo(img, -1, exposure);
+    // 5. The camera: exposure and the light's spatial and colour factors,
+    // the lens residual, optics blur, sensor noise.
+    if (!light_map_[c].empty() || o.colour_cast > 0.0) {
+      const cv::Mat& light_map = light_map_[c];
+      const float gain[3] = {static_cast<float>(exposure * look_.colour_gain_bgr[0]),
+                             static_cast<float>(exposure * look_.colour_gain_bgr[1]),
+                             static_cast<float>(exposure * look_.colour_gain_bgr[2])};
+      for (int y = 0; y < img.rows; ++y) {
+        std::uint8_t* row = img.ptr<std::uint8_t>(y);
+        const float* lrow = light_map.empty() ? nullptr : light_map.ptr<float>(y);
+        for (int x = 0; x < img.cols; ++x) {
+          const float f = lrow ? lrow[x] : 1.0f;
+          for (int ch = 0; ch < 3; ++ch) {
+            row[3 * x + ch] = cv::saturate_cast<std::uint8_t>(row[3 * x + ch] * (f * gain[ch]));
+          }
+        }
+      }
+    } else if (o.exposure_jitter > 0.0) {
+      img.convertTo(img, -1, exposure);
+    }
+    if (!lens_map1_[c].empty()) {
+      cv::remap(img, blurred_, lens_map1_[c], lens_map2_[c], cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      std::swap(img, blurred_);
+    }
     if (o.blur_sigma_px > 0.0) {
       cv::GaussianBlur(img, blurred_, cv::Size(0, 0), o.blur_sigma_px, o.blur_sigma_px, cv::BORDER_REFLECT);
       std::swap(img, blurred_);
     }
-    if (o.pixel_noise_dn > 0.0) {
+    if (o.sensor_noise && noise_sigma_.back() > 0.0f) {
+      // Shot and read noise: sigma by the pixel's level, from the same
+      // stream of normal deviates as the plain noise below.
+      Rng rng(mix_seed(mix_seed(o.seed, kNoiseStream + c), static_cast<std::uint64_t>(t_ns)));
+      const int n = 3 * img.cols;
+      for (int y = 0; y < img.rows; ++y) {
+        std::uint8_t* row = img.ptr<std::uint8_t>(y);
+        for (int x = 0; x < n; x += 4) {
+          std::uint64_t bits = rng.next_u64();
+          const int m = std::min(4, n - x);
+          for (int j = 0; j < m; ++j, bits >>= 16) {
+            row[x + j] =
+                cv::saturate_cast<std::uint8_t>(row[x + j] + noise_sigma_[row[x + j]] * normal_table_[bits & 0xffff]);
+          }
+        }
+      }
+    } else if (!o.sensor_noise && o.pixel_noise_dn > 0.0) {
       Rng rng(mix_seed(mix_seed(o.seed, kNoiseStream + c), static_cast<std::uint64_t>(t_ns)));
       const float sigma = static_cast<float>(o.pixel_noise_dn);
       const int n = 3 * img.cols;

@@ -231,8 +231,9 @@ Eigen::Vector2d StereoMarkerSimulator::project(const Vec3& p_in_leftcam, std::si
 }
 
 StereoFrame StereoMarkerSimulator::simulate(const HandPose& hand, const Pose& T_world_head, TimeNs t_ns,
-                                            StereoGroundTruth* truth) const {
+                                            StereoGroundTruth* truth, std::span<const Vec3> skin_offsets) const {
   const std::size_t n = markers_.size();
+  const bool skin = skin_offsets.size() == n && n > 0;
   const StereoSimOptions& o = options_;
   const PinholeCamera& k = rig_.camera;
 
@@ -298,7 +299,8 @@ StereoFrame StereoMarkerSimulator::simulate(const HandPose& hand, const Pose& T_
       const Pose& T_world_seg = hand.joint(m.segment);
       // The other hand is the mirror image: x -> -x in every segment frame,
       // as in the hand model and ImuGloveDescription::place_markers.
-      const Vec3 p_seg = mirror ? Vec3(-m.p_in_segment.x(), m.p_in_segment.y(), m.p_in_segment.z()) : m.p_in_segment;
+      const Vec3 p_placed = skin ? Vec3(m.p_in_segment + skin_offsets[j]) : m.p_in_segment;
+      const Vec3 p_seg = mirror ? Vec3(-p_placed.x(), p_placed.y(), p_placed.z()) : p_placed;
       const Vec3 n_seg =
           mirror ? Vec3(-m.normal_in_segment.x(), m.normal_in_segment.y(), m.normal_in_segment.z()) : m.normal_in_segment;
       const Vec3 p_world = T_world_seg * p_seg;

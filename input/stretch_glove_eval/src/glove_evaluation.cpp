@@ -35,6 +35,38 @@ double percentile(std::vector<float> v, double q) {
 
 }  // namespace
 
+std::string_view to_string(GloveRealismEffect e) noexcept {
+  switch (e) {
+    case GloveRealismEffect::noise: return "noise";
+    case GloveRealismEffect::outliers: return "outliers";
+    case GloveRealismEffect::drift: return "drift";
+    case GloveRealismEffect::fabrication: return "fabrication";
+    case GloveRealismEffect::donning: return "donning";
+    case GloveRealismEffect::creep: return "creep";
+    case GloveRealismEffect::wrist: return "wrist";
+  }
+  return "?";
+}
+
+std::optional<GloveRealismEffect> parse_glove_realism_effect(std::string_view s) noexcept {
+  for (GloveRealismEffect e : kGloveRealismEffects) {
+    if (to_string(e) == s) return e;
+  }
+  return std::nullopt;
+}
+
+void GloveSessionSpec::switch_off(GloveRealismEffect e) {
+  switch (e) {
+    case GloveRealismEffect::noise: simulator.enable_noise = false; break;
+    case GloveRealismEffect::outliers: simulator.enable_outliers = false; break;
+    case GloveRealismEffect::drift: simulator.enable_drift = false; break;
+    case GloveRealismEffect::fabrication: simulator.enable_fabrication_spread = false; break;
+    case GloveRealismEffect::donning: simulator.enable_donning_variation = false; break;
+    case GloveRealismEffect::creep: simulator.enable_creep = false; break;
+    case GloveRealismEffect::wrist: wrist_motion = false; break;
+  }
+}
+
 std::string_view to_string(CalibrationMode m) noexcept {
   return m == CalibrationMode::session ? "session min-max" : "training-data min-max";
 }
@@ -45,7 +77,7 @@ Result<GloveSessionResult> run_glove_session(const StretchGloveLayout& layout, c
   if (!subject) return subject.error();
   auto shape = subject->shape();
   if (!shape) return shape.error();
-  sim::StretchGloveSimOptions so;
+  sim::StretchGloveSimOptions so = spec.simulator;
   so.glove_seed = spec.seed;  // the physical glove the shipped model was trained on (seed 1)
   so.seed = mix_seed(mix_seed(spec.seed, 7000 + static_cast<std::uint64_t>(spec.subject)),
                      static_cast<std::uint64_t>(spec.session));
@@ -56,6 +88,7 @@ Result<GloveSessionResult> run_glove_session(const StretchGloveLayout& layout, c
   sess.exploration_s = spec.exploration_s;
   sess.task_s = spec.task_s;
   sess.task_motion.hand = subject->dominant_hand;
+  sess.wrist_motion = spec.wrist_motion;
   sim::StretchGloveSession session(std::move(*simulator), sess);
 
   // Two models: the network as it is, and what an app sees (1€-filtered).

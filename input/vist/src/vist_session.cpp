@@ -6,6 +6,8 @@ namespace proprio::vist {
 namespace {
 
 std::string side(Handedness h) { return std::string(to_string(h)); }
+constexpr const char* kImuStreamPrefix = "imu/";
+constexpr const char* kSaturatedSuffix = "/saturated";
 
 }  // namespace
 
@@ -36,7 +38,7 @@ Result<VistSessionWriter> VistSessionWriter::create(const std::filesystem::path&
   s.imu_streams_.resize(info.glove.imus.size());
   for (std::size_t i = 0; i < info.glove.imus.size(); ++i) {
     nlohmann::json im = {{"sensor_id", i}, {"mount", info.glove.imus[i].name}};
-    auto id = s.writer_.add_stream(StreamKind::imu, "imu/" + std::to_string(i), im.dump());
+    auto id = s.writer_.add_stream(StreamKind::imu, kImuStreamPrefix + std::to_string(i), im.dump());
     if (!id) return id.error();
     s.imu_streams_[i] = *id;
   }
@@ -44,18 +46,22 @@ Result<VistSessionWriter> VistSessionWriter::create(const std::filesystem::path&
   return s;
 }
 
-Result<StreamId> VistSessionWriter::imu_stream(std::uint16_t sensor_id) {
-  if (sensor_id >= imu_streams_.size()) imu_streams_.resize(sensor_id + 1u);
-  if (!imu_streams_[sensor_id]) {
-    auto id = writer_.add_stream(StreamKind::imu, "imu/" + std::to_string(sensor_id));
+// A clipped sample goes to its own stream, so a replay rejects it as the live
+// tracker did (the recording's IMU record has no flag for it).
+Result<StreamId> VistSessionWriter::imu_stream(std::uint16_t sensor_id, bool saturated) {
+  auto& streams = saturated ? saturated_streams_ : imu_streams_;
+  if (sensor_id >= streams.size()) streams.resize(sensor_id + 1u);
+  if (!streams[sensor_id]) {
+    auto id = writer_.add_stream(StreamKind::imu, kImuStreamPrefix + std::to_string(sensor_id) +
+                                                      (saturated ? kSaturatedSuffix : ""));
     if (!id) return id.error();
-    imu_streams_[sensor_id] = *id;
+    streams[sensor_id] = *id;
   }
-  return *imu_streams_[sensor_id];
+  return *streams[sensor_id];
 }
 
 Status VistSessionWriter::write_imu(const TimedImuSample& s) {
-  auto id = imu_stream(s.sample.sensor_id);
+  auto id = imu_stream(s.sample.sensor_id, s.saturated);
   if (!id) return id.error();
   return writer_.write(*id, s.sample, s.time_ns);
 }
@@ -137,7 +143,8 @@ Result<std::optional<VistSessionItem>> VistSessionReader::next() {
     if (auto* imu = std::get_if<ImuSample>(&r.payload)) {
       if (frame) ++skipped_;  // a frame cut short by IMU data: incomplete, dropped
       frame.reset();
-      return std::optional<VistSessionItem>{TimedImuSample{r.time_ns, *imu, false}};
+      const bool saturated = name.ends_with(kSaturatedSuffix);
+      return std::optional<VistSessionItem>{TimedImuSample{r.time_ns, *imu, saturated}};
     }
     if (auto* rp = std::get_if<RigidPose>(&r.payload); rp && name == kVistLeftCamStream) {
       if (frame) ++skipped_;

@@ -127,6 +127,40 @@ std::optional<FrameMode> parse_frame_mode(std::string_view s) noexcept {
   return std::nullopt;
 }
 
+std::string_view to_string(RealismEffect e) noexcept {
+  switch (e) {
+    case RealismEffect::glove_build: return "glove_build";
+    case RealismEffect::sliding: return "sliding";
+    case RealismEffect::wobble: return "wobble";
+    case RealismEffect::slip: return "slip";
+    case RealismEffect::camera: return "camera";
+    case RealismEffect::natural_motion: return "natural_motion";
+    case RealismEffect::tremor: return "tremor";
+    case RealismEffect::flicks: return "flicks";
+  }
+  return "?";
+}
+
+std::optional<RealismEffect> parse_realism_effect(std::string_view s) noexcept {
+  for (RealismEffect e : kRealismEffects) {
+    if (to_string(e) == s) return e;
+  }
+  return std::nullopt;
+}
+
+void SessionSpec::switch_off(RealismEffect e) {
+  switch (e) {
+    case RealismEffect::glove_build: glove_build = sim::GloveBuildErrors::as_drawn(); break;
+    case RealismEffect::sliding: soft_tissue.sliding = false; break;
+    case RealismEffect::wobble: soft_tissue.wobble = false; break;
+    case RealismEffect::slip: soft_tissue.slip = false; break;
+    case RealismEffect::camera: camera_realism = false; break;
+    case RealismEffect::natural_motion: protocol = sim::MotionProtocol::free_motion; break;
+    case RealismEffect::tremor: tremor = false; break;
+    case RealismEffect::flicks: flicks = false; break;
+  }
+}
+
 ErrorSummary summarize(std::vector<float>& e) {
   ErrorSummary s;
   s.samples = e.size();
@@ -178,6 +212,8 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
   mo.protocol = spec.protocol;
   mo.hand = spec.hand;
   mo.seed = mix_seed(seed, 1);
+  mo.tremor = spec.tremor;
+  mo.flicks = spec.flicks;
   sim::HandMotionGenerator motion(HandModel(*shape), mo);
   sim::HandMotionGenerator truth_motion(HandModel(*shape), mo);  // same motion, sampled separately
 
@@ -202,6 +238,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     io.visibility.seed = so.seed;
     io.seed = mix_seed(seed, 6);
     io.distractors = spec.challenge == Challenge::distractors ? spec.distractor_count : 0;
+    if (!spec.camera_realism) io.switch_off_camera_realism();
     auto r = sim::StereoImageSimulator::create(worn, *shape, io);
     if (!r) return r.error();
     renderer.emplace(std::move(*r));
@@ -210,6 +247,31 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     detector.emplace(std::move(*d));
   }
   // The stereo simulator places markers for a right hand and mirrors them for a left pose.
+
+  // Soft tissue moves every marker and IMU on its bone; it samples its own
+  // copy of the motion (for the wobble's accelerations).
+  sim::HandMotionGenerator tissue_motion(HandModel(*shape), mo);
+  std::vector<sim::SkinMount> mounts;
+  for (const PlacedMarker& m : stereo->markers()) {
+    mounts.push_back({m.segment, m.p_in_segment, spec.hand == Handedness::left});
+  }
+  const std::size_t first_imu_mount = mounts.size();
+  for (const sim::ImuMounting& m : imu->mountings()) mounts.push_back({m.segment, m.T_segment_imu_nominal.p, false});
+  auto tissue = sim::SoftTissue::create([&tissue_motion](TimeNs t) { return tissue_motion.sample(t).pose; }, mounts,
+                                        spec.soft_tissue, mix_seed(seed, 8));
+  if (!tissue) return tissue.error();
+  const bool soft = spec.soft_tissue.any();
+  if (soft) {
+    imu->set_mount_offsets([&tissue, first_imu_mount](std::size_t i, const HandPose& pose, TimeNs t) {
+      return tissue->offset(first_imu_mount + i, pose, t);
+    });
+  }
+  std::vector<Vec3> skin_offsets;
+  auto marker_skin = [&](const HandPose& pose, TimeNs t) -> std::span<const Vec3> {
+    if (!soft) return {};
+    tissue->offsets(pose, t, skin_offsets);
+    return std::span<const Vec3>(skin_offsets).first(first_imu_mount);
+  };
 
   vist::VistTrackerOptions to = base_options;
   to.hand = spec.hand;
@@ -233,7 +295,8 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
     if (!w) return w.error();
     recorder.emplace(std::move(*w));
   }
-  const auto scale_truth = true_scales(model, glove, *shape, spec.hand);
+  // The scales that best map the drawn levers onto the glove as it is worn: what a tracker could reach.
+  const auto scale_truth = true_scales(model, worn, *shape, spec.hand);
   std::vector<Quat> q_imu_segment_truth;
   for (const auto& seg : model.segments) {
     q_imu_segment_truth.push_back(imu->mountings()[seg.imu_sensor_id].T_segment_imu.q.conjugate());
@@ -310,7 +373,8 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
         HandPose shown = mf.pose;
         if (spec.challenge == Challenge::out_of_view && out_of_view_window(t_s)) shown.active = false;
         const bool occluding = spec.challenge == Challenge::occlude_half && hidden_window(t_s);
-        renderer->render(shown, mf.T_world_head, cap, images, nullptr, occluding ? &occluded_half : nullptr);
+        renderer->render(shown, mf.T_world_head, cap, images, nullptr, occluding ? &occluded_half : nullptr,
+                         marker_skin(mf.pose, cap));
         if (images.dropped) continue;
         a.frame.time_ns = cap;
         if (auto st = detector->detect_stereo(images.images[0], images.images[1], a.frame.cameras[0],
@@ -321,7 +385,7 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
         in_flight.push_back(std::move(a));
         continue;
       }
-      a.frame = stereo->simulate(mf.pose, mf.T_world_head, cap, &gt);
+      a.frame = stereo->simulate(mf.pose, mf.T_world_head, cap, &gt, marker_skin(mf.pose, cap));
       if (a.frame.dropped) continue;  // nothing arrives
       const double t_s = 1e-9 * static_cast<double>(cap);
       for (std::size_t c = 0; c < 2; ++c) {
@@ -356,7 +420,10 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
         auto& filter = tracker->filter();
         for (std::size_t k = 0; k < model.segments.size(); ++k) {
           const auto& seg = model.segments[k];
-          const Pose T_world_imu_true = truth.pose.joint(seg.segment) * imu->mountings()[seg.imu_sensor_id].T_segment_imu;
+          const Vec3 skin = soft ? tissue->offset(first_imu_mount + seg.imu_sensor_id, truth.pose, it->capture)
+                                 : Vec3(Vec3::Zero());
+          const Pose T_world_imu_true = truth.pose.joint(seg.segment) * Pose{Quat::Identity(), skin} *
+                                        imu->mountings()[seg.imu_sensor_id].T_segment_imu;
           const auto& s = filter.state(k);
           Eigen::Matrix<double, 6, 1> e;
           e.head<3>() = T_world_imu_true.p - s.p_imu_in_world;

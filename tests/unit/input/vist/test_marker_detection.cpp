@@ -487,10 +487,13 @@ TEST(MarkerDetectionOnImages, FreeMotionWithClutterAndDistractors) {
   ASSERT_GT(sc.eligible, 2000u);
   EXPECT_GE(sc.recall(), 0.95);
   EXPECT_GE(sc.recall_all(), 0.90);
-  // Centroid error against the noise-free projected centre, per image point
-  // (both axes): pixel noise, blur, thresholding and the perspective offset
-  // of a disc's image centroid together.
-  EXPECT_LT(sc.rms(), 0.3);
+  // Centroid error against the centroid of what was drawn (the detector's
+  // own error: noise, blur, highlights, thresholding), and against the
+  // noise-free projected centre at the frame's stamp, which adds the motion
+  // blur's offset (the stamp is the exposure's start, as UVC cameras stamp)
+  // and the perspective offset of a disc's image centroid.
+  EXPECT_LT(sc.rms_drawn(), 0.3);
+  EXPECT_LT(sc.rms(), 0.6);
   EXPECT_LT(sc.max_err, 3.0);
   // Marker-coloured distractors are found (a colour detector cannot tell
   // them apart; the stereo depth gate removes them). Anything else is rare:

@@ -67,7 +67,9 @@ TEST(VistSession, ReplayReproducesTheLiveTrackerExactly) {
   EXPECT_EQ(r->skipped_records, 0u);
   EXPECT_EQ(r->info.glove.markers.size(), ImuGloveDescription::vist_default().markers.size());
   ASSERT_TRUE(r->scored);
-  EXPECT_LT(r->keypoints.mean_mm, 6.0);
+  // A sanity bound: the session is 8 s of the realistic simulator (flicks,
+  // soft tissue, the glove as built); docs/benchmarks.md has the figures.
+  EXPECT_LT(r->keypoints.mean_mm, 15.0);
   EXPECT_GT(r->stereo_frames, 200u);
 
   // The replay sees the same inputs in the same order: the same output, to the bit.
@@ -86,6 +88,40 @@ TEST(VistSession, ReplayReproducesTheLiveTrackerExactly) {
     ++compared, ++i, ++j;
   }
   EXPECT_EQ(compared, live.size());
+}
+
+TEST(VistSession, ClippedImuSamplesKeepTheirFlag) {
+  // The live tracker rejects samples its device flagged as clipped; a replay
+  // must see the same flag, or it fuses what the live tracker did not.
+  const auto path = temp_path("clipped.prec");
+  VistSessionInfo info;
+  info.glove = ImuGloveDescription::vist_default();
+  {
+    auto w = VistSessionWriter::create(path, info, true);
+    ASSERT_TRUE(w) << w.error().message;
+    for (int i = 0; i < 4; ++i) {
+      TimedImuSample s;
+      s.time_ns = 1'000'000 * (i + 1);
+      s.sample.sensor_id = 1;
+      s.sample.accel_mps2 = Vec3(0.0, i == 2 ? 156.9 : 9.8, 0.0);
+      s.saturated = i == 2;
+      ASSERT_TRUE(w->write_imu(s));
+    }
+    ASSERT_TRUE(w->close());
+  }
+  auto r = VistSessionReader::open(path);
+  ASSERT_TRUE(r) << r.error().message;
+  std::vector<bool> flags;
+  for (;;) {
+    auto item = r->next();
+    ASSERT_TRUE(item) << item.error().message;
+    if (!*item) break;
+    if (auto* s = std::get_if<TimedImuSample>(&**item)) {
+      EXPECT_EQ(s->sample.sensor_id, 1u);
+      flags.push_back(s->saturated);
+    }
+  }
+  EXPECT_EQ(flags, (std::vector<bool>{false, false, true, false}));
 }
 
 TEST(VistSession, ACrashCutSessionStillReplaysUpToTheCut) {

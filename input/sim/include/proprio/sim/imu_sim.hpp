@@ -277,6 +277,14 @@ class ImuSimulator {
   // non-const pointer to change currents between ticks; dipoles attached to
   // hand joints follow the hand this simulator samples.
   void set_magnetic_environment(std::shared_ptr<const MagneticEnvironment> environment);
+
+  // Soft tissue (sim/soft_tissue.hpp): where IMU `imu`'s mount has moved from
+  // its place at time t (the hand then in `pose`), in its segment frame. Like
+  // the pose function it must be deterministic in t; the accelerometer then
+  // feels the mount's own motion (sliding, wobble). Empty (the default):
+  // rigidly on the bone.
+  using MountOffsetFunction = std::function<Vec3(std::size_t imu, const HandPose& pose, TimeNs t)>;
+  void set_mount_offsets(MountOffsetFunction offsets) { mount_offsets_ = std::move(offsets); }
   const MagneticEnvironment& magnetic_environment() const noexcept { return *magnetic_env_; }
 
  private:
@@ -303,6 +311,7 @@ class ImuSimulator {
   std::vector<ImuReading> readings_;
   std::vector<ImuGroundTruth> truth_;
   std::shared_ptr<const MagneticEnvironment> magnetic_env_;
+  MountOffsetFunction mount_offsets_;
   std::int64_t mag_last_slot_ = -1;  // decimation of the compass rate from the tick rate
 };
 

@@ -32,6 +32,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -175,8 +176,11 @@ class StereoMarkerSimulator {
   // The blobs both cameras see of a hand at time t, with the head (and so the
   // cameras) at T_world_head. Fills `truth` when given. Thread-safe (const,
   // no shared state).
+  // skin_offsets_in_segment (empty, or one per marker): where soft tissue has
+  // moved each marker from its place this frame (sim/soft_tissue.hpp), in its
+  // segment frame as placed (mirrored with the place for the other hand).
   StereoFrame simulate(const HandPose& hand_in_world, const Pose& T_world_head, TimeNs t_ns,
-                       StereoGroundTruth* truth = nullptr) const;
+                       StereoGroundTruth* truth = nullptr, std::span<const Vec3> skin_offsets_in_segment = {}) const;
 
   Pose T_world_leftcam(const Pose& T_world_head) const { return T_world_head * rig_.T_head_leftcam; }
   // Noise-free projection of a point in the left camera frame into camera 0/1.

@@ -36,6 +36,23 @@ enum class CalibrationMode : std::uint8_t {
 };
 std::string_view to_string(CalibrationMode m) noexcept;
 
+// The simulated glove's departures from an ideal one, each of which a
+// session can switch off (`bench glove --realism-ablation`).
+enum class GloveRealismEffect : std::uint8_t {
+  noise,        // the read-out's white noise
+  outliers,     // spikes (a touch, a contact bounce)
+  drift,        // the slow common gain drift
+  fabrication,  // the cells' C0 spread (per glove)
+  donning,      // per-donning gain, offset, pre-stretch and slip of the cells
+  creep,        // the glove creeping over the session
+  wrist,        // wrist motion the glove feels but the model does not output
+};
+inline constexpr std::array<GloveRealismEffect, 7> kGloveRealismEffects{
+    GloveRealismEffect::noise,    GloveRealismEffect::outliers, GloveRealismEffect::drift, GloveRealismEffect::fabrication,
+    GloveRealismEffect::donning,  GloveRealismEffect::creep,    GloveRealismEffect::wrist};
+std::string_view to_string(GloveRealismEffect e) noexcept;
+std::optional<GloveRealismEffect> parse_glove_realism_effect(std::string_view s) noexcept;
+
 struct GloveSessionSpec {
   int subject = kFirstHeldOutSubject;
   int session = 0;  // the donning
@@ -44,6 +61,11 @@ struct GloveSessionSpec {
   std::uint64_t seed = 1;
   CalibrationMode calibration = CalibrationMode::session;
   sim::StretchFaults faults;
+  // The simulated glove; its seeds are set from seed, subject and session.
+  sim::StretchGloveSimOptions simulator;
+  bool wrist_motion = true;
+
+  void switch_off(GloveRealismEffect e);
 };
 
 struct GloveSessionResult {

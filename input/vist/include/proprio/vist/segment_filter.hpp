@@ -173,9 +173,13 @@ struct FilterOptions {
   // Phalanx length ratios vary between people by a few per cent (Buchholz
   // et al. 1992 report their ratios with such spreads): an assumption.
   double scale_coupling_sigma = 0.03;
-  // Marker measurements: added to the triangulation covariance (glove
-  // marker placement and blob-centroid bias).
-  double marker_extra_sigma_m = 0.0005;
+  // Marker measurements: added to the triangulation covariance. It stands
+  // for how far a marker may sit from its place in the glove's file: 2.5 mm
+  // for a hand-sewn glove (1.5 mm of making and 2 mm of donning, the
+  // simulator's sim::GloveBuildErrors). A glove measured against its file
+  // can set it lower; trusting the file more than it deserves makes the
+  // filter overconfident and less accurate (docs/benchmarks.md).
+  double marker_extra_sigma_m = 0.0025;
   // Chi-square gate per marker (3 DOF): 16.27 is the 99.9 % quantile.
   double marker_gate_chi2 = 16.27;
   // Scales are kept in this range whatever a correction says.

@@ -5,6 +5,7 @@
 //
 // Streams (names follow the format's conventions):
 //   imu/<n>              imu          IMU n of the glove (n = sensor_id = index in the glove description)
+//   imu/<n>/saturated    imu          its samples the device flagged as clipped (declared on the first one)
 //   cam/vist/markers     markers      one record per camera image (camera_id 0 = left, 1 = right), at capture time
 //   cam/vist/leftcam     rigid_pose   T_world_leftcam at the same capture time, written before the two images
 //   hand/<side>/ground_truth  hand_pose   simulator or mocap truth (optional)
@@ -50,9 +51,10 @@ class VistSessionWriter {
 
  private:
   explicit VistSessionWriter(RecordingWriter w) : writer_(std::move(w)) {}
-  Result<StreamId> imu_stream(std::uint16_t sensor_id);
+  Result<StreamId> imu_stream(std::uint16_t sensor_id, bool saturated);
   RecordingWriter writer_;
   std::vector<std::optional<StreamId>> imu_streams_;
+  std::vector<std::optional<StreamId>> saturated_streams_;
   StreamId markers_ = 0, leftcam_ = 0, truth_ = 0, output_ = 0;
 };
 

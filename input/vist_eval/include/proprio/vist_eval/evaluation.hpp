@@ -9,6 +9,7 @@
 // blobs (detections, or blobs found by the OpenCV detector in rendered images)
 // that arrive camera_latency_s after their capture. The keypoints are the
 // thesis's: dorsum (the palm joint), thumb, index and middle fingertips.
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -20,6 +21,7 @@
 #include "proprio/core/result.hpp"
 #include "proprio/sim/glove_as_built.hpp"
 #include "proprio/sim/hand_motion.hpp"
+#include "proprio/sim/soft_tissue.hpp"
 #include "proprio/vist/vist_session.hpp"
 #include "proprio/vist/vist_tracker.hpp"
 
@@ -45,6 +47,24 @@ std::string_view to_string(Ablation a) noexcept;
 std::string_view to_string(FrameMode m) noexcept;
 std::optional<FrameMode> parse_frame_mode(std::string_view s) noexcept;
 
+// The simulator's departures from an idealised glove and camera, each of
+// which a session can switch off (the benchmark's realism ablation).
+enum class RealismEffect : std::uint8_t {
+  glove_build,     // markers and IMUs off their drawn places (sim/glove_as_built.hpp)
+  sliding,         // skin sliding with the joints (sim/soft_tissue.hpp)
+  wobble,          // the skin patch ringing on its bone
+  slip,            // the glove creeping over the session
+  camera,          // the image simulator's camera realism (images mode only)
+  natural_motion,  // continuous natural movement instead of the thesis's free-motion protocol
+  tremor,          // physiological tremor on the natural movement
+  flicks,          // quick flicks of the wrist and fingers in the natural movement
+};
+inline constexpr std::array<RealismEffect, 8> kRealismEffects{
+    RealismEffect::glove_build, RealismEffect::sliding,        RealismEffect::wobble, RealismEffect::slip,
+    RealismEffect::camera,      RealismEffect::natural_motion, RealismEffect::tremor, RealismEffect::flicks};
+std::string_view to_string(RealismEffect e) noexcept;
+std::optional<RealismEffect> parse_realism_effect(std::string_view s) noexcept;
+
 struct SessionSpec {
   int subject = 0;             // proprio::sim::sim_subject id
   double duration_s = 60.0;
@@ -52,7 +72,8 @@ struct SessionSpec {
   Challenge challenge = Challenge::none;
   Ablation ablation = Ablation::full;
   FrameMode mode = FrameMode::detections;
-  sim::MotionProtocol protocol = sim::MotionProtocol::free_motion;
+  // Natural movement by default; switch_off(natural_motion) gives the thesis's free-motion protocol.
+  sim::MotionProtocol protocol = sim::MotionProtocol::natural;
   Handedness hand = Handedness::right;
   double camera_latency_s = 0.05;   // capture to arrival of a stereo frame
   double warmup_s = 5.0;            // not scored: acquisition and first calibration
@@ -62,6 +83,22 @@ struct SessionSpec {
   // description the tracker reads (sim/glove_as_built.hpp). One glove per seed;
   // each session (subject) is a donning. as_drawn() for the idealised glove.
   sim::GloveBuildErrors glove_build;
+  // The skin and fabric under the glove's markers and IMUs (sim/soft_tissue.hpp):
+  // sliding with the joints, wobble, slip. rigid() for mounts fixed to the bones.
+  sim::SoftTissueOptions soft_tissue;
+  // Images mode: false renders with the camera's idealised look (no motion
+  // blur, distortion residual, uneven or coloured light, highlights).
+  bool camera_realism = true;
+  // Natural motion only (sim::HandMotionOptions).
+  bool tremor = true;
+  bool flicks = true;
+
+  // Turns one realism effect off (natural_motion: the thesis's free-motion protocol).
+  void switch_off(RealismEffect e);
+  // Every realism effect off: the idealised simulator of the first wave.
+  void idealise() {
+    for (RealismEffect e : kRealismEffects) switch_off(e);
+  }
   // Calibration accuracy is read at this time (the issue: "after 30 s").
   double calibration_check_s = 30.0;
   // When set, the session is also recorded there (vist_session.hpp): the

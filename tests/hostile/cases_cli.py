@@ -449,3 +449,12 @@ def _(t):
     t.path("empty").mkdir()
     t.run("haptics", "sim", env={"PROPRIO_DATA_DIR": str(t.path("empty"))}, timeout=30).fails_cleanly(
         r"empty/haptics/band_2dof\.toml")
+
+
+# --- 28: simulator switches -------------------------------------------------------------
+
+
+@case("28 bench glove / bench vist --without an effect that does not exist: refused by name, nothing runs")
+def _(t):
+    t.run("bench", "glove", "--subjects", "1", "--without", "noise,gremlins", timeout=30).fails_cleanly(r"gremlins")
+    t.run("bench", "vist", "--subjects", "1", "--without", "", timeout=30).fails_cleanly(r"without")

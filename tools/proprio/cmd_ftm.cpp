@@ -30,6 +30,7 @@ struct BenchFtmArgs {
   double minutes = 1.0;
   std::uint64_t seed = 1;
   std::string cases = "imu_bench,free_motion,pinch_grasp,disturbance";
+  bool rigid_skin = false;
   bool json = false;
 };
 
@@ -59,6 +60,7 @@ int run_bench_ftm(const BenchFtmArgs& a) {
   o.subjects = a.subjects;
   o.task_s = a.minutes * 60.0;
   o.seed = a.seed;
+  if (a.rigid_skin) o.soft_tissue = sim::SoftTissueOptions::rigid();
   if (auto st = o.validate(); !st) {
     std::fprintf(stderr, "error: %s\n", st.error().message.c_str());
     return 1;
@@ -351,6 +353,8 @@ void add_ftm_commands(CLI::App& app, int& exit_code) {
   b->add_option("--seed", args->seed, "first seed (subject i uses seed + i)")->capture_default_str();
   b->add_option("--cases", args->cases, "comma-separated: imu_bench, free_motion, pinch_grasp, disturbance")
       ->capture_default_str();
+  b->add_flag("--rigid-skin", args->rigid_skin,
+              "the IMUs fixed to the bones (by default they sit on skin that slides, wobbles and slips)");
   b->add_flag("--json", args->json, "print the metrics as JSON");
   b->callback([args, &exit_code] { exit_code = run_bench_ftm(*args); });
 

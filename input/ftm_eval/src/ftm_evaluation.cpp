@@ -64,12 +64,14 @@ FtmCaseResult not_run(FtmCase which, std::string reason) {
   return r;
 }
 
-ftm_sim::FtmWearerOptions wearer_options(int subject, std::uint64_t seed, sim::MotionProtocol protocol, double task_s) {
+ftm_sim::FtmWearerOptions wearer_options(const FtmBenchOptions& bench, int subject, std::uint64_t seed,
+                                         sim::MotionProtocol protocol, double task_s) {
   ftm_sim::FtmWearerOptions o;
   o.seed = seed;
   o.subject.subject_index = subject;
   o.protocol = protocol;
   o.task_s = task_s;
+  o.soft_tissue = bench.soft_tissue;
   return o;
 }
 
@@ -176,7 +178,7 @@ FtmCaseResult run_on_hand(FtmCase which, const FtmBenchOptions& options, FtmProg
   for (int i = 0; i < options.subjects; ++i) {
     const int subject = options.first_subject + i;
     auto session = start_session(
-        wearer_options(subject, options.seed + static_cast<std::uint64_t>(i), protocol, options.task_s), {true});
+        wearer_options(options, subject, options.seed + static_cast<std::uint64_t>(i), protocol, options.task_s), {true});
     if (!session) {
       return not_run(which, "subject " + std::to_string(subject) + ": " + session.error().message);
     }
@@ -272,7 +274,7 @@ FtmCaseResult run_disturbance(const FtmBenchOptions& options, FtmProgress progre
     const int subject = options.first_subject + i;
     const TimeNs lead = 2 * kNsPerSecond;
     auto o =
-        wearer_options(subject, options.seed + static_cast<std::uint64_t>(i), sim::MotionProtocol::pinch_grasp, 1.0);
+        wearer_options(options, subject, options.seed + static_cast<std::uint64_t>(i), sim::MotionProtocol::pinch_grasp, 1.0);
     // The objects' times are in simulation time: the task starts after the
     // calibration phases, whose length a probe wearer tells.
     auto probe = ftm_sim::FtmWearerSimulator::create(o);
@@ -642,6 +644,7 @@ Status FtmBenchOptions::validate() const {
   if (!std::isfinite(bench_hold_s) || bench_hold_s < 1.0 || bench_hold_s > 120.0) {
     return fail("bench_hold_s", "must be in [1, 120] s");
   }
+  if (auto st = soft_tissue.validate(); !st) return st.error().with_context("FtmBenchOptions");
   return {};
 }
 
@@ -650,7 +653,8 @@ std::string FtmBenchOptions::describe() const {
   s << "first_subject=" << first_subject << " subjects=" << subjects << " task_s=" << task_s << " seed=" << seed
     << " disturbance_hold_s=" << disturbance_hold_s << " bench_hold_s=" << bench_hold_s
     << " bench_turn_on_bias=" << (bench_turn_on_bias ? "on" : "off")
-    << " disturbance_truth_heading_deg=" << disturbance_truth_heading_deg << " detector: " << detector.describe();
+    << " disturbance_truth_heading_deg=" << disturbance_truth_heading_deg << " detector: " << detector.describe()
+    << " soft tissue: " << soft_tissue.describe();
   return s.str();
 }
 

@@ -21,6 +21,7 @@ enum Stream : std::uint64_t {
   kWristDropoutStream = 8,
   kImuStream = 9,
   kFigureEightStream = 10,
+  kSoftTissueStream = 11,
 };
 
 constexpr double kTwoPi = 2.0 * M_PI;
@@ -118,6 +119,7 @@ Status FtmWearerOptions::validate() const {
     return FTM_SIM_BAD("task_s", task_s, driven_task ? "use a duration in (0, 86400] s" : "use a duration in (0, 3600] s");
   }
   if (auto st = imu.validate(); !st) return st.error().with_context("FtmWearerOptions.imu");
+  if (auto st = soft_tissue.validate(); !st) return st.error().with_context("FtmWearerOptions.soft_tissue");
   if (!imu.magnetometer.enabled) {
     return FTM_SIM_BAD("imu.magnetometer.enabled", 0.0, "the FTM's MPU-9250s have a compass; enable it");
   }
@@ -233,7 +235,7 @@ std::string FtmWearerOptions::describe() const {
                   1e3 * magnetic.lead_separation_m);
     extra += lb;
   }
-  return buf + extra + " | imu: " + imu.describe();
+  return buf + extra + " | soft tissue: " + soft_tissue.describe() + " | imu: " + imu.describe();
 }
 
 // ---------------------------------------------------------------------------
@@ -431,10 +433,23 @@ Status FtmWearerSimulator::init() {
     }
   }
 
+  std::vector<sim::SkinMount> mounts;
+  for (const PlacedImu& p : placed) mounts.push_back({p.segment, p.T_segment_imu.p, false});
   auto imu = sim::ImuSimulator::create([this](TimeNs tt) { return pose_at(tt); }, std::move(placed), o.imu,
                                        mix_seed(o.seed, kImuStream), 0);
   if (!imu) return imu.error().with_context("FTM wearer IMUs");
   imu_sim_.emplace(std::move(*imu));
+  sim::SoftTissueOptions tissue = o.soft_tissue;
+  if (o.driven_task) tissue.wobble = false;  // the wobble integrates ahead of the driven motion
+  if (tissue.any()) {
+    auto st = sim::SoftTissue::create([this](TimeNs tt) { return pose_at(tt); }, std::move(mounts), tissue,
+                                      mix_seed(o.seed, kSoftTissueStream));
+    if (!st) return st.error().with_context("FTM wearer soft tissue");
+    soft_tissue_.emplace(std::move(*st));
+    imu_sim_->set_mount_offsets([this](std::size_t i, const HandPose& pose, TimeNs tt) {
+      return soft_tissue_->offset(i, pose, tt);
+    });
+  }
   imu_sim_->set_magnetic_environment(env_);
 
   // Bend sensors: per-donning constants, noise streams.

@@ -171,6 +171,7 @@ Status FilterOptions::validate() const {
                   positive(joint_rotation_sigma, "joint_rotation_sigma"),
                   positive(scale_coupling_sigma, "scale_coupling_sigma"),
                   non_negative(marker_extra_sigma_m, "marker_extra_sigma_m"),
+                  non_negative(clipped_accel_sigma_mps2, "clipped_accel_sigma_mps2"),
                   positive(marker_gate_chi2, "marker_gate_chi2"), positive(min_scale, "min_scale")}) {
     if (!st) return st;
   }
@@ -194,7 +195,8 @@ std::string FilterOptions::describe() const {
     << initial.mounting_rad << " rad\n"
     << "  constraints: joint position sigma " << joint_position_sigma_m << " m, rotation sigma "
     << joint_rotation_sigma << ", scale coupling sigma " << scale_coupling_sigma << "\n"
-    << "  markers: extra sigma " << marker_extra_sigma_m << " m, chi² gate " << marker_gate_chi2 << "\n";
+    << "  markers: extra sigma " << marker_extra_sigma_m << " m, chi² gate " << marker_gate_chi2 << "\n"
+    << "  clipped accelerometer: sigma " << clipped_accel_sigma_mps2 << " m/s²\n";
   return s.str();
 }
 
@@ -215,6 +217,7 @@ VistFilter::VistFilter(VistModel model, FilterOptions options)
   times_.assign(n, 0);
   last_gyro_.assign(n, Vec3::Zero());
   last_accel_.assign(n, Vec3::Zero());
+  last_accel_clipped_.assign(n, false);
   has_sample_.assign(n, false);
   phi_acc_.assign(n, Mat15::Identity());
   q_acc_.assign(n, Mat15::Zero());
@@ -313,14 +316,18 @@ void VistFilter::integrate_nominal(SegmentState& s, double dt_s, const Vec3& gyr
   s.q_world_imu = (s.q_world_imu * so3_exp(dt_s * w)).normalized();
 }
 
-bool VistFilter::propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, const Vec3& accel_mps2) noexcept {
+bool VistFilter::propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, const Vec3& accel_mps2,
+                           bool accel_clipped) noexcept {
   if (k >= states_.size() || !gyro_radps.allFinite() || !accel_mps2.allFinite()) return false;
   if (t_ns < times_[k]) return false;
   const Vec3 gyro_prev = has_sample_[k] ? last_gyro_[k] : gyro_radps;
   const Vec3 accel_prev = has_sample_[k] ? last_accel_[k] : accel_mps2;
+  // The step uses the mean of both samples: either one clipped spoils it.
+  const bool clipped = accel_clipped || (has_sample_[k] && last_accel_clipped_[k]);
   const double dt = 1e-9 * static_cast<double>(t_ns - times_[k]);
   last_gyro_[k] = gyro_radps;
   last_accel_[k] = accel_mps2;
+  last_accel_clipped_[k] = accel_clipped;
   has_sample_[k] = true;
   times_[k] = t_ns;
   if (dt <= 0.0 || !initialized_) return true;
@@ -345,6 +352,14 @@ bool VistFilter::propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, c
   Q.block<3, 3>(6, 6) = Mat3::Identity() * sg2 * dt;
   Q.block<3, 3>(9, 9) = Mat3::Identity() * n.gyro_bias_random_walk * n.gyro_bias_random_walk * dt;
   Q.block<3, 3>(12, 12) = Mat3::Identity() * n.accel_bias_random_walk * n.accel_bias_random_walk * dt;
+  if (clipped) {
+    // An unknown acceleration of this sigma held over the step.
+    const double c2 = options_.clipped_accel_sigma_mps2 * options_.clipped_accel_sigma_mps2;
+    Q.block<3, 3>(0, 0) += Mat3::Identity() * c2 * dt * dt * dt * dt / 4.0;
+    Q.block<3, 3>(0, 3) += Mat3::Identity() * c2 * dt * dt * dt / 2.0;
+    Q.block<3, 3>(3, 0) += Mat3::Identity() * c2 * dt * dt * dt / 2.0;
+    Q.block<3, 3>(3, 3) += Mat3::Identity() * c2 * dt * dt;
+  }
 
   phi_acc_[k] = phi * phi_acc_[k];
   q_acc_[k] = phi * q_acc_[k] * phi.transpose() + Q;
@@ -382,7 +397,7 @@ void VistFilter::propagate_all_to(TimeNs t_ns) noexcept {
       if (has_sample_[k]) {
         // Hold the last sample: the mean of it with itself.
         const Vec3 g = last_gyro_[k], a = last_accel_[k];
-        propagate(k, t_ns, g, a);
+        propagate(k, t_ns, g, a, last_accel_clipped_[k]);
       } else {
         times_[k] = t_ns;  // no IMU data yet: nothing to integrate
       }

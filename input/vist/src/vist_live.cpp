@@ -128,7 +128,8 @@ VistLiveInput::VistLiveInput(VistHandSource& sink, std::size_t imu_count, const 
     TimedImuSample s;
     s.time_ns = g.time_ns;
     s.sample = g.imu;
-    s.saturated = (g.status & (devices::imu_status::accel_saturated | devices::imu_status::gyro_saturated)) != 0;
+    s.accel_clipped = (g.status & devices::imu_status::accel_saturated) != 0;
+    s.gyro_clipped = (g.status & devices::imu_status::gyro_saturated) != 0;
     sink_.push_imu(s);
     imu_samples_.fetch_add(1, std::memory_order_relaxed);
   });

@@ -7,7 +7,10 @@ namespace {
 
 std::string side(Handedness h) { return std::string(to_string(h)); }
 constexpr const char* kImuStreamPrefix = "imu/";
-constexpr const char* kSaturatedSuffix = "/saturated";
+// Samples the device flagged as clipped go to streams of their own (the
+// recording's IMU record has no flag), so a replay treats them as the live
+// tracker did. Index: accel_clipped + 2 * gyro_clipped.
+constexpr std::array<const char*, 4> kClipSuffix{"", "/clipped/accel", "/clipped/gyro", "/clipped/both"};
 
 }  // namespace
 
@@ -35,25 +38,22 @@ Result<VistSessionWriter> VistSessionWriter::create(const std::filesystem::path&
   auto o2 = s.writer_.add_stream(StreamKind::hand_pose, "hand/" + side(info.hand) + "/vist");
   if (!o2) return o2.error();
   s.output_ = *o2;
-  s.imu_streams_.resize(info.glove.imus.size());
+  s.imu_streams_[0].resize(info.glove.imus.size());
   for (std::size_t i = 0; i < info.glove.imus.size(); ++i) {
     nlohmann::json im = {{"sensor_id", i}, {"mount", info.glove.imus[i].name}};
     auto id = s.writer_.add_stream(StreamKind::imu, kImuStreamPrefix + std::to_string(i), im.dump());
     if (!id) return id.error();
-    s.imu_streams_[i] = *id;
+    s.imu_streams_[0][i] = *id;
   }
   if (auto st = s.writer_.flush(); !st) return st.error();
   return s;
 }
 
-// A clipped sample goes to its own stream, so a replay rejects it as the live
-// tracker did (the recording's IMU record has no flag for it).
-Result<StreamId> VistSessionWriter::imu_stream(std::uint16_t sensor_id, bool saturated) {
-  auto& streams = saturated ? saturated_streams_ : imu_streams_;
+Result<StreamId> VistSessionWriter::imu_stream(std::uint16_t sensor_id, std::size_t clip) {
+  auto& streams = imu_streams_[clip];
   if (sensor_id >= streams.size()) streams.resize(sensor_id + 1u);
   if (!streams[sensor_id]) {
-    auto id = writer_.add_stream(StreamKind::imu, kImuStreamPrefix + std::to_string(sensor_id) +
-                                                      (saturated ? kSaturatedSuffix : ""));
+    auto id = writer_.add_stream(StreamKind::imu, kImuStreamPrefix + std::to_string(sensor_id) + kClipSuffix[clip]);
     if (!id) return id.error();
     streams[sensor_id] = *id;
   }
@@ -61,7 +61,7 @@ Result<StreamId> VistSessionWriter::imu_stream(std::uint16_t sensor_id, bool sat
 }
 
 Status VistSessionWriter::write_imu(const TimedImuSample& s) {
-  auto id = imu_stream(s.sample.sensor_id, s.saturated);
+  auto id = imu_stream(s.sample.sensor_id, (s.accel_clipped ? 1u : 0u) + (s.gyro_clipped ? 2u : 0u));
   if (!id) return id.error();
   return writer_.write(*id, s.sample, s.time_ns);
 }
@@ -143,8 +143,13 @@ Result<std::optional<VistSessionItem>> VistSessionReader::next() {
     if (auto* imu = std::get_if<ImuSample>(&r.payload)) {
       if (frame) ++skipped_;  // a frame cut short by IMU data: incomplete, dropped
       frame.reset();
-      const bool saturated = name.ends_with(kSaturatedSuffix);
-      return std::optional<VistSessionItem>{TimedImuSample{r.time_ns, *imu, saturated}};
+      TimedImuSample s{r.time_ns, *imu};
+      for (std::size_t clip = 1; clip < kClipSuffix.size(); ++clip) {
+        if (!name.ends_with(kClipSuffix[clip])) continue;
+        s.accel_clipped = (clip & 1u) != 0;
+        s.gyro_clipped = (clip & 2u) != 0;
+      }
+      return std::optional<VistSessionItem>{s};
     }
     if (auto* rp = std::get_if<RigidPose>(&r.payload); rp && name == kVistLeftCamStream) {
       if (frame) ++skipped_;

@@ -68,7 +68,8 @@ std::string VistStats::describe() const {
   std::ostringstream s;
   s << "imu samples " << imu_samples << " (rejected: " << imu_rejected_non_finite << " non-finite, "
     << imu_rejected_saturated << " saturated, " << imu_rejected_out_of_order << " out of order, "
-    << imu_rejected_unknown_sensor << " unknown sensor, " << imu_rejected_time_jump << " time jumps); frames " << frames << " (fused " << frames_fused
+    << imu_rejected_unknown_sensor << " unknown sensor, " << imu_rejected_time_jump << " time jumps; "
+    << imu_accel_clipped << " used with a clipped accelerometer); frames " << frames << " (fused " << frames_fused
     << ", late " << frames_late << ", duplicate " << frames_duplicate << ", before acquisition "
     << frames_before_init << "); acquisitions " << acquisitions << ", re-acquisitions " << reacquisitions
     << "; stereo points " << stereo_points << ", correspondences " << correspondences << ", markers fused "
@@ -166,11 +167,14 @@ bool VistTracker::add_imu(const TimedImuSample& s) {
     ++stats_.imu_rejected_non_finite;
     return false;
   }
-  if ((s.saturated && options_.reject_saturated) || a.cwiseAbs().maxCoeff() > options_.max_abs_accel_mps2 ||
+  // Beyond the device's range is not a reading; a clipped gyro has lost the
+  // attitude. A clipped accelerometer still leaves a good gyro (accel_clipped).
+  if ((s.gyro_clipped && options_.reject_saturated) || a.cwiseAbs().maxCoeff() > options_.max_abs_accel_mps2 ||
       w.cwiseAbs().maxCoeff() > options_.max_abs_gyro_radps) {
     ++stats_.imu_rejected_saturated;
     return false;
   }
+  if (s.accel_clipped) ++stats_.imu_accel_clipped;
   // Even an IMU's first sample waits for its second (one sample of latency at
   // start): a far-future first stamp would otherwise make every later sample
   // look out of order and stop the fusion for good.
@@ -249,7 +253,7 @@ void VistTracker::integrate_queued_until(TimeNs t_ns) {
     }
     const auto k = static_cast<std::size_t>(segment_of_sensor_[s.sample.sensor_id]);
     if (options_.use_imu) {
-      filter_.propagate(k, s.time_ns, s.sample.gyro_radps, s.sample.accel_mps2);
+      filter_.propagate(k, s.time_ns, s.sample.gyro_radps, s.sample.accel_mps2, s.accel_clipped);
     } else {
       const SegmentState& st = filter_.state(k);
       const Vec3 f_rest = st.q_world_imu.conjugate() * Vec3(0.0, options_.filter.gravity_mps2, 0.0);

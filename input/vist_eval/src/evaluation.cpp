@@ -453,7 +453,8 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
       if (unplugged) break;
       ts.time_ns = r.time_ns;
       ts.sample = r.sample;
-      ts.saturated = r.accel_saturated || r.gyro_saturated;
+      ts.accel_clipped = r.accel_saturated;
+      ts.gyro_clipped = r.gyro_saturated;
       new_pose = tracker->add_imu(ts) || new_pose;
       if (recorder) {
         if (auto st = recorder->write_imu(ts); !st) return st.error();

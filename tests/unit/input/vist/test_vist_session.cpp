@@ -104,7 +104,8 @@ TEST(VistSession, ClippedImuSamplesKeepTheirFlag) {
       s.time_ns = 1'000'000 * (i + 1);
       s.sample.sensor_id = 1;
       s.sample.accel_mps2 = Vec3(0.0, i == 2 ? 156.9 : 9.8, 0.0);
-      s.saturated = i == 2;
+      s.accel_clipped = i == 2;
+      s.gyro_clipped = i == 3;
       ASSERT_TRUE(w->write_imu(s));
     }
     ASSERT_TRUE(w->close());
@@ -118,10 +119,11 @@ TEST(VistSession, ClippedImuSamplesKeepTheirFlag) {
     if (!*item) break;
     if (auto* s = std::get_if<TimedImuSample>(&**item)) {
       EXPECT_EQ(s->sample.sensor_id, 1u);
-      flags.push_back(s->saturated);
+      flags.push_back(s->accel_clipped);
+      flags.push_back(s->gyro_clipped);
     }
   }
-  EXPECT_EQ(flags, (std::vector<bool>{false, false, true, false}));
+  EXPECT_EQ(flags, (std::vector<bool>{false, false, false, false, true, false, false, true}));
 }
 
 TEST(VistSession, ACrashCutSessionStillReplaysUpToTheCut) {

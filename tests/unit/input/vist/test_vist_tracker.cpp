@@ -132,8 +132,11 @@ TEST_F(VistTrackerInput, CountsAndDropsBadImuSamples) {
   nan.sample.gyro_radps.x() = std::numeric_limits<double>::quiet_NaN();
   t.add_imu(nan);
   auto sat = sample(20, 0);
-  sat.saturated = true;
+  sat.gyro_clipped = true;
   t.add_imu(sat);
+  auto clipped_accel = sample(25, 0);  // used: its gyro is good
+  clipped_accel.accel_clipped = true;
+  t.add_imu(clipped_accel);
   auto huge = sample(30, 0);
   huge.sample.accel_mps2.x() = 1e4;
   t.add_imu(huge);
@@ -142,9 +145,10 @@ TEST_F(VistTrackerInput, CountsAndDropsBadImuSamples) {
   t.add_imu(sample(35, 0));  // out of order
   t.add_imu(sample(50, 99));  // no such IMU
   const auto& s = t.stats();
-  EXPECT_EQ(s.imu_samples, 7u);
+  EXPECT_EQ(s.imu_samples, 8u);
   EXPECT_EQ(s.imu_rejected_non_finite, 1u);
   EXPECT_EQ(s.imu_rejected_saturated, 2u);
+  EXPECT_EQ(s.imu_accel_clipped, 1u);
   EXPECT_EQ(s.imu_rejected_out_of_order, 2u);
   EXPECT_EQ(s.imu_rejected_unknown_sensor, 1u);
   EXPECT_FALSE(t.initialized());

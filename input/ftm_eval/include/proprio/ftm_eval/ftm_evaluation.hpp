@@ -30,6 +30,7 @@
 
 #include "proprio/core/result.hpp"
 #include "proprio/ftm/mag_disturbance.hpp"
+#include "proprio/sim/soft_tissue.hpp"
 
 namespace proprio::ftm_eval {
 
@@ -71,6 +72,8 @@ struct FtmBenchOptions {
   // fit over the figure-eight), as a user does. false: the filter learns the
   // gyro offset online only and the accelerometer's is left in (ablation).
   bool bench_turn_on_bias = true;
+  // The glove's IMUs on skin (sim/soft_tissue.hpp); rigid() for the idealised glove.
+  sim::SoftTissueOptions soft_tissue;
   Status validate() const;  // Errc::invalid_argument naming the field
   std::string describe() const;
 };

@@ -40,6 +40,7 @@
 #include "proprio/sim/hand_motion.hpp"
 #include "proprio/sim/imu_sim.hpp"
 #include "proprio/sim/magnetic_field.hpp"
+#include "proprio/sim/soft_tissue.hpp"
 
 namespace proprio::ftm_sim {
 
@@ -209,6 +210,10 @@ struct FtmWearerOptions {
   FtmMagneticOptions magnetic;
   FtmCalibrationPhaseOptions calibration;
   FtmSynergyOptions synergy;
+  // The IMUs sit on skin (sim/soft_tissue.hpp): sliding with the joints,
+  // wobble, slip. A driven task has no motion ahead of now to drive the wobble
+  // with, so there it has sliding and slip only. rigid() for mounts fixed to the bones.
+  sim::SoftTissueOptions soft_tissue;
 
   // MPU-9250 defaults of ImuNoiseOptions at the board's 200 Hz, compass on, raw output.
   static sim::ImuNoiseOptions default_imu();
@@ -319,6 +324,7 @@ class FtmWearerSimulator final : public ftm::FtmSampleFeed {
   std::shared_ptr<sim::MagneticEnvironment> env_;
   std::array<std::optional<std::size_t>, 3> device_dipole_{};
   std::optional<sim::ImuSimulator> imu_sim_;
+  std::optional<sim::SoftTissue> soft_tissue_;
 
   std::array<double, ftm::kFtmBendCount> bend_c0_{};
   std::array<double, ftm::kFtmBendCount> bend_gain_{};

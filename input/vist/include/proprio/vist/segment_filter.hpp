@@ -180,6 +180,11 @@ struct FilterOptions {
   // can set it lower; trusting the file more than it deserves makes the
   // filter overconfident and less accurate (docs/benchmarks.md).
   double marker_extra_sigma_m = 0.0025;
+  // A sample whose accelerometer clipped (a quick flick swings a fingertip
+  // IMU past 16 g) still has a good gyro: it is integrated, and the unknown
+  // part of its acceleration enters the velocity as white noise of this
+  // sigma (about half the MPU-9250's 16 g range again beyond the clip).
+  double clipped_accel_sigma_mps2 = 80.0;
   // Chi-square gate per marker (3 DOF): 16.27 is the 99.9 % quantile.
   double marker_gate_chi2 = 16.27;
   // Scales are kept in this range whatever a correction says.
@@ -229,7 +234,10 @@ class VistFilter {
   // One IMU sample of segment k, measured at t (after the segment's time).
   // Integrates from the segment's time to t with the mean of the previous and
   // this sample. Rejects non-finite samples (returns false; the caller counts).
-  bool propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, const Vec3& accel_mps2) noexcept;
+  // accel_clipped: the device flagged its accelerometer as clipped
+  // (FilterOptions::clipped_accel_sigma_mps2).
+  bool propagate(std::size_t k, TimeNs t_ns, const Vec3& gyro_radps, const Vec3& accel_mps2,
+                 bool accel_clipped = false) noexcept;
   // Brings every segment to time t by holding its last sample (t >= each segment's time).
   void propagate_all_to(TimeNs t_ns) noexcept;
 
@@ -300,6 +308,7 @@ class VistFilter {
   std::vector<SegmentState> states_backup_;  // corrected states, checked before they replace states_
   std::vector<TimeNs> times_;
   std::vector<Vec3> last_gyro_, last_accel_;
+  std::vector<bool> last_accel_clipped_;
   std::vector<bool> has_sample_;
   // Deferred propagation: accumulated transition and noise since the last flush.
   std::vector<Mat15> phi_acc_, q_acc_;

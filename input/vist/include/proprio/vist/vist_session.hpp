@@ -5,7 +5,8 @@
 //
 // Streams (names follow the format's conventions):
 //   imu/<n>              imu          IMU n of the glove (n = sensor_id = index in the glove description)
-//   imu/<n>/saturated    imu          its samples the device flagged as clipped (declared on the first one)
+//   imu/<n>/clipped/accel, .../gyro, .../both
+//                        imu          its samples the device flagged as clipped (declared on the first one)
 //   cam/vist/markers     markers      one record per camera image (camera_id 0 = left, 1 = right), at capture time
 //   cam/vist/leftcam     rigid_pose   T_world_leftcam at the same capture time, written before the two images
 //   hand/<side>/ground_truth  hand_pose   simulator or mocap truth (optional)
@@ -14,6 +15,7 @@
 // docs/vist-glove.md>, "hand": "right", "nominal_hand_length_m", "nominal_hand_width_m"}.
 // Record times are measurement times; file order is arrival order (a stereo
 // frame arrives tens of ms after its capture, after later IMU samples).
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -51,10 +53,10 @@ class VistSessionWriter {
 
  private:
   explicit VistSessionWriter(RecordingWriter w) : writer_(std::move(w)) {}
-  Result<StreamId> imu_stream(std::uint16_t sensor_id, bool saturated);
+  // clip: accel_clipped + 2 * gyro_clipped.
+  Result<StreamId> imu_stream(std::uint16_t sensor_id, std::size_t clip);
   RecordingWriter writer_;
-  std::vector<std::optional<StreamId>> imu_streams_;
-  std::vector<std::optional<StreamId>> saturated_streams_;
+  std::array<std::vector<std::optional<StreamId>>, 4> imu_streams_;  // per clip kind, per sensor
   StreamId markers_ = 0, leftcam_ = 0, truth_ = 0, output_ = 0;
 };
 

@@ -42,7 +42,11 @@ namespace proprio::vist {
 struct TimedImuSample {
   TimeNs time_ns = 0;  // when it was measured (CLOCK_MONOTONIC, or the session's clock)
   ImuSample sample;    // sensor_id = index of the IMU in the glove description
-  bool saturated = false;  // the device flagged a clipped axis
+  // The device flagged a clipped axis. A clipped gyro loses the attitude: the
+  // sample is rejected. A clipped accelerometer is integrated with its
+  // uncertainty raised (FilterOptions::clipped_accel_sigma_mps2).
+  bool accel_clipped = false;
+  bool gyro_clipped = false;
 };
 
 struct VistTrackerOptions {
@@ -78,7 +82,7 @@ struct VistTrackerOptions {
   // Samples with any axis beyond these are rejected as corrupt (the device's full scale + margin).
   double max_abs_accel_mps2 = 16.0 * 9.80665 * 1.05;
   double max_abs_gyro_radps = 2000.0 * 0.017453292519943295 * 1.05;
-  bool reject_saturated = true;
+  bool reject_saturated = true;  // reject samples whose gyro the device flagged as clipped
   // An IMU sample this much later than the previous one of its IMU waits for
   // the next: if that one is earlier, the jump was a bad stamp (a wall-clock
   // time, a flipped bit) and only that sample is dropped (TimestampGuard).
@@ -91,7 +95,8 @@ struct VistTrackerOptions {
 struct VistStats {
   std::uint64_t imu_samples = 0;
   std::uint64_t imu_rejected_non_finite = 0;
-  std::uint64_t imu_rejected_saturated = 0;
+  std::uint64_t imu_rejected_saturated = 0;   // gyro clipped or beyond its range
+  std::uint64_t imu_accel_clipped = 0;        // used, with the clipped acceleration's uncertainty
   std::uint64_t imu_rejected_out_of_order = 0;  // older than or equal to the previous sample of that IMU
   std::uint64_t imu_rejected_unknown_sensor = 0;
   std::uint64_t imu_rejected_time_jump = 0;  // an isolated jump forward in time, not confirmed by the next sample

@@ -162,6 +162,54 @@ struct DiscCoverage {
   double sv = 0.0;
 };
 
+// How much of pixel (x, y) the perspective image of a flat disc (centre c,
+// unit normal n, radius r, camera frame) covers: the share of its 4x4 samples
+// inside, their mean offset from the pixel centre, and the depth of the
+// pixel's ray on the disc's plane. Pixels well inside or well outside skip the
+// supersampling. False when the pixel is not covered at all.
+struct DiscPixel {
+  double inside = 0.0;
+  double off_u = 0.0, off_v = 0.0;
+  double z = 0.0;
+};
+bool disc_pixel(const CameraView& cam, const Vec3& c, const Vec3& n, double n_dot_c, double r, double r2,
+                double inv_f, int x, int y, DiscPixel& out) {
+  const Vec3 d = cam.ray(x, y);
+  const double denom = n.dot(d);
+  if (std::abs(denom) < 1e-9) return false;  // edge-on
+  out.z = n_dot_c / denom;                   // depth of the ray's hit on the disc's plane
+  if (!(out.z > 1e-4)) return false;
+  const double rho = (out.z * d - c).norm();
+  // Half a pixel diagonal, measured on the disc's plane (stretched by obliquity).
+  const double footprint = 0.75 * out.z * inv_f * d.squaredNorm() / std::abs(denom);
+  out.off_u = out.off_v = 0.0;
+  if (rho <= r - footprint) {
+    out.inside = 1.0;
+    return true;
+  }
+  if (rho >= r + footprint) return false;
+  int hits = 0;
+  for (int sy = 0; sy < 4; ++sy) {
+    for (int sx = 0; sx < 4; ++sx) {
+      const double ou = -0.375 + 0.25 * sx;
+      const double ov = -0.375 + 0.25 * sy;
+      const Vec3 ds = cam.ray(x + ou, y + ov);
+      const double dn = n.dot(ds);
+      if (std::abs(dn) < 1e-12) continue;
+      if (((n_dot_c / dn) * ds - c).squaredNorm() <= r2) {
+        ++hits;
+        out.off_u += ou;
+        out.off_v += ov;
+      }
+    }
+  }
+  if (hits == 0) return false;
+  out.inside = hits / 16.0;
+  out.off_u /= hits;
+  out.off_v /= hits;
+  return true;
+}
+
 // Draws the perspective image of a flat disc (centre c, unit normal n,
 // radius r, camera frame) in one colour, blending each pixel by the share of
 // its 4x4 samples inside the disc. Pixels well inside or well outside skip
@@ -180,40 +228,9 @@ DiscCoverage draw_disc(cv::Mat& img, const CameraView& cam, const Vec3& c, const
   for (int y = box.v0; y <= box.v1; ++y) {
     auto* row = img.ptr<cv::Vec3b>(y);
     for (int x = box.u0; x <= box.u1; ++x) {
-      const Vec3 d = cam.ray(x, y);
-      const double denom = n.dot(d);
-      if (std::abs(denom) < 1e-9) continue;  // edge-on
-      const double z = n_dot_c / denom;      // depth of the ray's hit on the disc's plane
-      if (!(z > 1e-4)) continue;
-      const double rho = (z * d - c).norm();
-      // Half a pixel diagonal, measured on the disc's plane (stretched by obliquity).
-      const double footprint = 0.75 * z * inv_f * d.squaredNorm() / std::abs(denom);
-      double inside = 0.0, off_u = 0.0, off_v = 0.0;
-      if (rho <= r - footprint) {
-        inside = 1.0;
-      } else if (rho >= r + footprint) {
-        continue;
-      } else {
-        int hits = 0;
-        for (int sy = 0; sy < 4; ++sy) {
-          for (int sx = 0; sx < 4; ++sx) {
-            const double ou = -0.375 + 0.25 * sx;
-            const double ov = -0.375 + 0.25 * sy;
-            const Vec3 ds = cam.ray(x + ou, y + ov);
-            const double dn = n.dot(ds);
-            if (std::abs(dn) < 1e-12) continue;
-            if (((n_dot_c / dn) * ds - c).squaredNorm() <= r2) {
-              ++hits;
-              off_u += ou;
-              off_v += ov;
-            }
-          }
-        }
-        if (hits == 0) continue;
-        inside = hits / 16.0;
-        off_u /= hits;
-        off_v /= hits;
-      }
+      DiscPixel px_on;
+      if (!disc_pixel(cam, c, n, n_dot_c, r, r2, inv_f, x, y, px_on)) continue;
+      const double inside = px_on.inside, off_u = px_on.off_u, off_v = px_on.off_v, z = px_on.z;
       cov.unoccluded += inside;
       if (hidden(x, y, z)) continue;
       cov.drawn += inside;
@@ -296,39 +313,10 @@ DiscCoverage draw_marker(cv::Mat& img, const CameraView& cam, std::span<const Ma
     for (int y = box.v0; y <= box.v1; ++y) {
       double* arow = acc.data() + static_cast<std::size_t>(y - all.v0) * bw * kStride;
       for (int x = box.u0; x <= box.u1; ++x) {
+        DiscPixel px_on;
+        if (!disc_pixel(cam, c, n, n_dot_c, r, r2, inv_f, x, y, px_on)) continue;
+        const double inside = px_on.inside, off_u = px_on.off_u, off_v = px_on.off_v, z = px_on.z;
         const Vec3 d = cam.ray(x, y);
-        const double denom = n.dot(d);
-        if (std::abs(denom) < 1e-9) continue;  // edge-on
-        const double z = n_dot_c / denom;
-        if (!(z > 1e-4)) continue;
-        const double rho = (z * d - c).norm();
-        const double footprint = 0.75 * z * inv_f * d.squaredNorm() / std::abs(denom);
-        double inside = 0.0, off_u = 0.0, off_v = 0.0;
-        if (rho <= r - footprint) {
-          inside = 1.0;
-        } else if (rho >= r + footprint) {
-          continue;
-        } else {
-          int hits = 0;
-          for (int sy = 0; sy < 4; ++sy) {
-            for (int sx = 0; sx < 4; ++sx) {
-              const double ou = -0.375 + 0.25 * sx;
-              const double ov = -0.375 + 0.25 * sy;
-              const Vec3 ds = cam.ray(x + ou, y + ov);
-              const double dn = n.dot(ds);
-              if (std::abs(dn) < 1e-12) continue;
-              if (((n_dot_c / dn) * ds - c).squaredNorm() <= r2) {
-                ++hits;
-                off_u += ou;
-                off_v += ov;
-              }
-            }
-          }
-          if (hits == 0) continue;
-          inside = hits / 16.0;
-          off_u /= hits;
-          off_v /= hits;
-        }
         const double wi = w * inside;
         cov.unoccluded += wi;
         if (hidden(x, y, z)) continue;

@@ -25,7 +25,9 @@ constexpr CommandInfo kCommands[] = {
     {"bench", "Benchmarks that measure accuracy on simulated data", Family::split, true},
     {"bench vist",
      "Run the VIST evaluation protocol on simulated subjects and print the accuracy:\n"
-     "free motion (a random target pose every 3 s), challenges (half the markers occluded 2 s,\n"
+     "natural motion (continuous, with tremor and flicks) on a simulator as hard as real hands (the glove as built,\n"
+     "soft tissue, a real camera's images in image mode; --without, --idealised, --suite realism for the ablation),\n"
+     "challenges (half the markers occluded 2 s,\n"
      "hand out of view 3 s, distractor blobs, 10% dropped frames, IMU board unplugged 1 s) and ablations (IMU only,\n"
      "vision only, correspondence search without IMU priors).",
      Family::trackers, false},
@@ -33,6 +35,7 @@ constexpr CommandInfo kCommands[] = {
      "Run the stretch glove's pipeline (read-out, min-max calibration, ONNX pose model, hand) on held-out\n"
      "simulated subjects and print the joint-angle error with each session's own min-max calibration (the thesis's\n"
      "scenario 4) and, with --global-model, with the training data's min-max (scenario 3).\n"
+     "--without and --realism-ablation switch the simulated glove's real-world effects off.\n"
      "Simulated accuracy is not real-world accuracy.",
      Family::trackers, false},
     {"bench ftm",

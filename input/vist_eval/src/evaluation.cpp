@@ -266,11 +266,11 @@ Result<SessionResult> run_session(const ImuGloveDescription& glove, const Sessio
       return tissue->offset(first_imu_mount + i, pose, t);
     });
   }
-  std::vector<Vec3> skin_offsets;
+  std::vector<Vec3> skin_offsets(first_imu_mount);
   auto marker_skin = [&](const HandPose& pose, TimeNs t) -> std::span<const Vec3> {
     if (!soft) return {};
-    tissue->offsets(pose, t, skin_offsets);
-    return std::span<const Vec3>(skin_offsets).first(first_imu_mount);
+    for (std::size_t i = 0; i < first_imu_mount; ++i) skin_offsets[i] = tissue->offset(i, pose, t);
+    return skin_offsets;
   };
 
   vist::VistTrackerOptions to = base_options;

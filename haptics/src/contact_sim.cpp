@@ -99,6 +99,9 @@ Status ContactSimOptions::validate() const {
   if (!(force_filter_time_constant_s >= 0.0 && force_filter_time_constant_s <= 0.05)) {
     return bad_option("force_filter_time_constant_s", "must be in [0, 50] ms", force_filter_time_constant_s);
   }
+  if (collider_slots < 0 || collider_slots > kMaxColliderSlots) {
+    return bad_option("collider_slots", "must be in [0, " + std::to_string(kMaxColliderSlots) + "]", collider_slots);
+  }
   return {};
 }
 
@@ -110,8 +113,18 @@ namespace {
 // Left hands mirror the right through the wrist frame's YZ plane (HandModel).
 Pose mirrored(const Pose& T) { return {Quat(T.q.w(), T.q.x(), -T.q.y(), -T.q.z()), Vec3(-T.p.x(), T.p.y(), T.p.z())}; }
 
+// Names of one hand's bodies, joints and geoms start with its prefix: none
+// in a one-hand world (the names `proprio haptics mjcf` always printed),
+// "left_"/"right_" with two.
+std::string hand_prefix(std::span<const ProxyHandSpec> hands, std::size_t h) {
+  if (hands.size() == 1) return {};
+  return hands[h].hand == Handedness::left ? "left_" : "right_";
+}
+
 // Per DOF: the hinge's name.
-std::string dof_joint_name(std::size_t dof) { return "proxy_" + std::string(to_string(static_cast<HandDof>(dof))); }
+std::string dof_joint_name(const std::string& pre, std::size_t dof) {
+  return pre + "proxy_" + std::string(to_string(static_cast<HandDof>(dof)));
+}
 
 struct Mjcf {
   std::ostringstream s;
@@ -278,16 +291,163 @@ Status check_plate(const SceneObject& o) {
 
 Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, const HapticScene& scene,
                                   const ContactSimOptions& o) {
+  const ProxyHandSpec one[] = {{hand_model, hand}};
+  return generate_mjcf(one, scene, o);
+}
+
+namespace {
+
+// One proxy hand and its coupling target, inside <worldbody>.
+void proxy_hand_bodies(Mjcf& m, const ProxyHandSpec& spec, const std::string& pre, const ContactSimOptions& o) {
+  const HandModel& hand_model = spec.model;
+  const HandShape& shape = hand_model.shape();
+  const JointLimits& limits = hand_model.limits();
+  const bool left = spec.hand == Handedness::left;
+  const auto side = [&](const Pose& T) { return left ? mirrored(T) : T; };
+  // The coupling target, placed each step at the (leashed) tracked wrist.
+  m.s << "    <body name=\"" << pre << "target_wrist\" mocap=\"true\"/>\n";
+  // The proxy hand. Zero angles at the world origin; ContactSimulation places it.
+  const auto T_wrist_joint = hand_model.joint_poses_in_wrist(Handedness::right, HandAngles{});
+  auto joint_p = [&](HandJoint j) { return T_wrist_joint[index_of(j)].p; };
+  m.s << "    <body name=\"" << pre << "proxy_wrist\">\n"
+      << "      <freejoint name=\"" << pre << "proxy_root\"/>\n";
+  {
+    // The palm: a box from the wrist to the knuckles, as wide as index to little.
+    const Vec3 pi = joint_p(HandJoint::index_proximal), pl = joint_p(HandJoint::little_proximal);
+    const Vec3 pm = joint_p(HandJoint::middle_proximal);
+    const double r = shape.fingers[1].joint_radius_m[1];
+    const Vec3 centre(0.5 * (pi.x() + pl.x()), 0.0, 0.5 * pm.z());
+    const Vec3 half(0.5 * std::abs(pi.x() - pl.x()) + r, 0.6 * shape.palm_radius_m, 0.5 * std::abs(pm.z()));
+    m.s << "      <geom name=\"" << pre << "proxy_palm\" type=\"box\" size=\"";
+    m.vec(half);
+    m.s << "\" pos=\"";
+    m.vec(left ? Vec3(-centre.x(), centre.y(), centre.z()) : centre);
+    m.s << "\" density=\"" << o.hand_density_kg_m3 << "\" friction=\"0.1 0.005 0.0001\"" << kHandContact
+        << " rgba=\"0.9 0.75 0.65 1\"/>\n";
+  }
+  const Vec3 abd_axis = left ? Vec3(0, -1, 0) : Vec3(0, 1, 0);
+  const auto hinge = [&](std::size_t dof, const Vec3& axis, const std::string& indent) {
+    m.s << indent << "<joint name=\"" << dof_joint_name(pre, dof) << "\" type=\"hinge\" axis=\"";
+    m.vec(axis);
+    m.s << "\" limited=\"true\" range=\"" << limits.min_rad[dof] << ' ' << limits.max_rad[dof] << "\" damping=\""
+        << o.coupling.joint_damping_nms_per_rad << "\" armature=\"" << o.coupling.joint_armature_kg_m2 << "\"/>\n";
+  };
+  const auto segment = [&](const std::string& name, double length, double radius, const std::string& indent) {
+    m.s << indent << "<geom name=\"" << name << "\" type=\"capsule\" fromto=\"0 0 0 0 0 " << -length << "\" size=\""
+        << radius << "\" density=\"" << o.hand_density_kg_m3 << "\" friction=\"0.1 0.005 0.0001\"" << kHandContact
+        << " rgba=\"0.9 0.75 0.65 1\"/>\n";
+  };
+  const Vec3 flex_axis(-1, 0, 0);  // flexion is a negative rotation about +X (HandModel)
+  for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+    const auto f = static_cast<Finger>(fi);
+    const HandShape::Finger& g = shape.fingers[fi];
+    const std::size_t d = first_dof_of(f);
+    const std::string fname(to_string(f));
+    const auto radius = [&](std::size_t k) { return 0.5 * (g.joint_radius_m[k] + g.joint_radius_m[k + 1]); };
+    std::string indent = "      ";
+    std::size_t bones_open = 0;
+    // The thumb's chain starts at its metacarpal (CMC: abduction then
+    // flexion; then MCP, IP). A finger's metacarpal is inside the palm box,
+    // so its chain starts at the proximal bone (MCP: abduction then flexion;
+    // then PIP, DIP). `first` is the first body's index into bone_length_m.
+    static constexpr const char* kThumbBones[] = {"metacarpal", "proximal", "distal"};
+    static constexpr const char* kFingerBones[] = {"proximal", "intermediate", "distal"};
+    const bool thumb = f == Finger::thumb;
+    const char* const* bones = thumb ? kThumbBones : kFingerBones;
+    const std::size_t first = thumb ? 0 : 1;
+    const Quat q_rest = g.q_wrist_metacarpal_rest;
+    const Pose T_wrist_first{q_rest, thumb ? g.p_base_in_wrist
+                                           : g.p_base_in_wrist + q_rest * Vec3(0, 0, -g.bone_length_m[0])};
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::size_t b = first + k;
+      const Pose T_local = k == 0 ? side(T_wrist_first) : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[b - 1])};
+      m.s << indent << "<body name=\"" << pre << "proxy_" << fname << '_' << bones[k] << '"';
+      m.pose_attrs(T_local);
+      m.s << ">\n";
+      indent += "  ";
+      if (k == 0) {
+        hinge(d + 1, abd_axis, indent);
+        hinge(d + 0, flex_axis, indent);
+      } else {
+        hinge(d + 1 + k, flex_axis, indent);
+      }
+      segment(pre + "proxy_" + fname + '_' + bones[k], g.bone_length_m[b], radius(b), indent);
+      ++bones_open;
+    }
+    while (bones_open-- > 0) {
+      indent.resize(indent.size() - 2);
+      m.s << indent << "</body>\n";
+    }
+  }
+  m.s << "    </body>\n";
+}
+
+// One proxy hand's wrist weld (inside <equality>) and joint servos (inside <actuator>).
+void proxy_hand_weld(Mjcf& m, const std::string& pre, const ContactSimOptions& o) {
+  const CouplingOptions& c = o.coupling;
+  m.s << "    <weld name=\"" << pre << "wrist_coupling\" body1=\"" << pre << "proxy_wrist\" body2=\"" << pre
+      << "target_wrist\" solref=\"" << c.wrist_time_constant_s << ' ' << c.wrist_damping_ratio << "\" solimp=\""
+      << c.wrist_impedance << ' ' << c.wrist_impedance << " 0.001\"/>\n";
+}
+
+void proxy_hand_servos(Mjcf& m, const ProxyHandSpec& spec, const std::string& pre, const ContactSimOptions& o) {
+  const CouplingOptions& c = o.coupling;
+  const JointLimits& limits = spec.model.limits();
+  for (std::size_t dof = 0; dof < kHandDofCount; ++dof) {
+    m.s << "    <position name=\"" << dof_joint_name(pre, dof) << "_servo\" joint=\"" << dof_joint_name(pre, dof)
+        << "\" kp=\"" << c.joint_stiffness_nm_per_rad << "\" ctrllimited=\"true\" ctrlrange=\"" << limits.min_rad[dof]
+        << ' ' << limits.max_rad[dof] << "\" forcelimited=\"true\" forcerange=\"" << -c.joint_max_torque_nm << ' '
+        << c.joint_max_torque_nm << "\"/>\n";
+  }
+}
+
+// A collider slot: a mocap body parked far below the floor (contacts
+// between two static bodies are never made, so it touches nothing there).
+constexpr double kParkedY = -1000.0;
+
+}  // namespace
+
+Status ColliderShape::validate() const {
+  const ColliderShape& o = *this;
+  switch (o.shape) {
+    case ShapeKind::sphere:
+    case ShapeKind::box:
+    case ShapeKind::capsule:
+    case ShapeKind::cylinder: break;
+    default:
+      return make_error(Errc::invalid_argument, "a collider is a sphere, box, capsule or cylinder, not a " +
+                                                    std::string(to_string(o.shape)));
+  }
+  const auto size_ok = [](double v) { return std::isfinite(v) && v >= 1e-4 && v <= 10.0; };
+  if (o.shape == ShapeKind::box) {
+    for (int k = 0; k < 3; ++k) {
+      if (!size_ok(o.half_extents_m[k])) {
+        return make_error(Errc::invalid_argument, "a box collider's half extents must be in [0.1 mm, 10 m]");
+      }
+    }
+  } else if (!size_ok(o.radius_m)) {
+    return make_error(Errc::invalid_argument, "a collider's radius must be in [0.1 mm, 10 m]");
+  }
+  if ((o.shape == ShapeKind::capsule || o.shape == ShapeKind::cylinder) && !size_ok(o.half_length_m)) {
+    return make_error(Errc::invalid_argument, "a capsule or cylinder collider's half length must be in [0.1 mm, 10 m]");
+  }
+  if (!(std::isfinite(o.friction) && o.friction >= 0.0 && o.friction <= 2.0)) {
+    return make_error(Errc::invalid_argument, "a collider's friction must be in [0, 2]");
+  }
+  return {};
+}
+
+Result<std::string> generate_mjcf(std::span<const ProxyHandSpec> hands, const HapticScene& scene,
+                                  const ContactSimOptions& o) {
   if (auto s = o.validate(); !s) return s.error();
   if (auto s = scene.validate(); !s) return s.error();
   for (const auto& obj : scene.objects) {
     if (auto s = check_plate(obj); !s) return s.error();
   }
-  const HandShape& shape = hand_model.shape();
-  const JointLimits& limits = hand_model.limits();
-  const bool left = hand == Handedness::left;
-  const auto side = [&](const Pose& T) { return left ? mirrored(T) : T; };
-
+  if (hands.empty() || hands.size() > kMaxProxyHands ||
+      (hands.size() == 2 && hands[0].hand == hands[1].hand)) {
+    return make_error(Errc::invalid_argument, "a contact simulation has one proxy hand, or two of opposite sides");
+  }
   Mjcf m;
   // A sparse constraint Jacobian although MuJoCo's auto picks dense below 60
   // DOFs: a contact row touches only the wrist, one finger chain and the
@@ -357,98 +517,19 @@ Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, 
     m.s << "    </body>\n";
   }
 
-  // The coupling target, placed each step at the (leashed) tracked wrist.
-  m.s << "    <body name=\"target_wrist\" mocap=\"true\"/>\n";
-
-  // The proxy hand. Zero angles at the world origin; ContactSimulation places it.
-  const auto T_wrist_joint = hand_model.joint_poses_in_wrist(Handedness::right, HandAngles{});
-  auto joint_p = [&](HandJoint j) { return T_wrist_joint[index_of(j)].p; };
-  m.s << "    <body name=\"proxy_wrist\">\n"
-      << "      <freejoint name=\"proxy_root\"/>\n";
-  {
-    // The palm: a box from the wrist to the knuckles, as wide as index to little.
-    const Vec3 pi = joint_p(HandJoint::index_proximal), pl = joint_p(HandJoint::little_proximal);
-    const Vec3 pm = joint_p(HandJoint::middle_proximal);
-    const double r = shape.fingers[1].joint_radius_m[1];
-    const Vec3 centre(0.5 * (pi.x() + pl.x()), 0.0, 0.5 * pm.z());
-    const Vec3 half(0.5 * std::abs(pi.x() - pl.x()) + r, 0.6 * shape.palm_radius_m, 0.5 * std::abs(pm.z()));
-    m.s << "      <geom name=\"proxy_palm\" type=\"box\" size=\"";
-    m.vec(half);
-    m.s << "\" pos=\"";
-    m.vec(left ? Vec3(-centre.x(), centre.y(), centre.z()) : centre);
-    m.s << "\" density=\"" << o.hand_density_kg_m3 << "\" friction=\"0.1 0.005 0.0001\"" << kHandContact
-        << " rgba=\"0.9 0.75 0.65 1\"/>\n";
+  for (int k = 0; k < o.collider_slots; ++k) {
+    m.s << "    <body name=\"collider_" << k << "\" mocap=\"true\" pos=\"0 " << kParkedY << " 0\">\n"
+        << "      <geom name=\"collider_" << k << "\" type=\"sphere\" size=\"0.01\" friction=\"0.8 0.005 0.0001\""
+        << kObjectContact << " rgba=\"0.4 0.6 0.9 1\"/>\n"
+        << "    </body>\n";
   }
-  const Vec3 abd_axis = left ? Vec3(0, -1, 0) : Vec3(0, 1, 0);
-  const auto hinge = [&](std::size_t dof, const Vec3& axis, const std::string& indent) {
-    m.s << indent << "<joint name=\"" << dof_joint_name(dof) << "\" type=\"hinge\" axis=\"";
-    m.vec(axis);
-    m.s << "\" limited=\"true\" range=\"" << limits.min_rad[dof] << ' ' << limits.max_rad[dof] << "\" damping=\""
-        << o.coupling.joint_damping_nms_per_rad << "\" armature=\"" << o.coupling.joint_armature_kg_m2 << "\"/>\n";
-  };
-  const auto segment = [&](const std::string& name, double length, double radius, const std::string& indent) {
-    m.s << indent << "<geom name=\"" << name << "\" type=\"capsule\" fromto=\"0 0 0 0 0 " << -length << "\" size=\""
-        << radius << "\" density=\"" << o.hand_density_kg_m3 << "\" friction=\"0.1 0.005 0.0001\"" << kHandContact
-        << " rgba=\"0.9 0.75 0.65 1\"/>\n";
-  };
-  const Vec3 flex_axis(-1, 0, 0);  // flexion is a negative rotation about +X (HandModel)
-  for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
-    const auto f = static_cast<Finger>(fi);
-    const HandShape::Finger& g = shape.fingers[fi];
-    const std::size_t d = first_dof_of(f);
-    const std::string fname(to_string(f));
-    const auto radius = [&](std::size_t k) { return 0.5 * (g.joint_radius_m[k] + g.joint_radius_m[k + 1]); };
-    std::string indent = "      ";
-    std::size_t bones_open = 0;
-    // The thumb's chain starts at its metacarpal (CMC: abduction then
-    // flexion; then MCP, IP). A finger's metacarpal is inside the palm box,
-    // so its chain starts at the proximal bone (MCP: abduction then flexion;
-    // then PIP, DIP). `first` is the first body's index into bone_length_m.
-    static constexpr const char* kThumbBones[] = {"metacarpal", "proximal", "distal"};
-    static constexpr const char* kFingerBones[] = {"proximal", "intermediate", "distal"};
-    const bool thumb = f == Finger::thumb;
-    const char* const* bones = thumb ? kThumbBones : kFingerBones;
-    const std::size_t first = thumb ? 0 : 1;
-    const Quat q_rest = g.q_wrist_metacarpal_rest;
-    const Pose T_wrist_first{q_rest, thumb ? g.p_base_in_wrist
-                                           : g.p_base_in_wrist + q_rest * Vec3(0, 0, -g.bone_length_m[0])};
-    for (std::size_t k = 0; k < 3; ++k) {
-      const std::size_t b = first + k;
-      const Pose T_local = k == 0 ? side(T_wrist_first) : Pose{Quat::Identity(), Vec3(0, 0, -g.bone_length_m[b - 1])};
-      m.s << indent << "<body name=\"proxy_" << fname << '_' << bones[k] << '"';
-      m.pose_attrs(T_local);
-      m.s << ">\n";
-      indent += "  ";
-      if (k == 0) {
-        hinge(d + 1, abd_axis, indent);
-        hinge(d + 0, flex_axis, indent);
-      } else {
-        hinge(d + 1 + k, flex_axis, indent);
-      }
-      segment("proxy_" + fname + '_' + bones[k], g.bone_length_m[b], radius(b), indent);
-      ++bones_open;
-    }
-    while (bones_open-- > 0) {
-      indent.resize(indent.size() - 2);
-      m.s << indent << "</body>\n";
-    }
-  }
-  m.s << "    </body>\n"
-      << "  </worldbody>\n";
-
-  const CouplingOptions& c = o.coupling;
-  m.s << "  <equality>\n"
-      << "    <weld name=\"wrist_coupling\" body1=\"proxy_wrist\" body2=\"target_wrist\" solref=\"" << c.wrist_time_constant_s
-      << ' ' << c.wrist_damping_ratio << "\" solimp=\"" << c.wrist_impedance << ' ' << c.wrist_impedance
-      << " 0.001\"/>\n"
-      << "  </equality>\n"
+  for (std::size_t h = 0; h < hands.size(); ++h) proxy_hand_bodies(m, hands[h], hand_prefix(hands, h), o);
+  m.s << "  </worldbody>\n"
+      << "  <equality>\n";
+  for (std::size_t h = 0; h < hands.size(); ++h) proxy_hand_weld(m, hand_prefix(hands, h), o);
+  m.s << "  </equality>\n"
       << "  <actuator>\n";
-  for (std::size_t dof = 0; dof < kHandDofCount; ++dof) {
-    m.s << "    <position name=\"" << dof_joint_name(dof) << "_servo\" joint=\"" << dof_joint_name(dof) << "\" kp=\""
-        << c.joint_stiffness_nm_per_rad << "\" ctrllimited=\"true\" ctrlrange=\"" << limits.min_rad[dof] << ' '
-        << limits.max_rad[dof] << "\" forcelimited=\"true\" forcerange=\"" << -c.joint_max_torque_nm << ' '
-        << c.joint_max_torque_nm << "\"/>\n";
-  }
+  for (std::size_t h = 0; h < hands.size(); ++h) proxy_hand_servos(m, hands[h], hand_prefix(hands, h), o);
   m.s << "  </actuator>\n"
       << "</mujoco>\n";
   return m.s.str();
@@ -517,22 +598,32 @@ void low_pass(FingertipForce& y, const FingertipForce& x, double alpha) noexcept
 
 }  // namespace
 
+
+// One proxy hand's part of the model and its per-step state.
 struct ContactSimulation::Impl {
+  struct Hand {
+    Hand(HandModel m, Handedness s) : model(std::move(m)), side(s) {}
+    HandModel model;
+    Handedness side = Handedness::right;
+    int root_qpos = 0, root_dof = 0;
+    int mocap = 0;
+    int root_body = 0;
+    std::array<int, kHandDofCount> dof_qpos{};
+    std::array<int, kHandDofCount> dof_actuator{};
+    std::array<int, kFingerCount> tip_body{};
+    Pose target_wrist;
+    HandAngles target_angles{};
+    std::array<FingertipContact, kFingerCount> tips{};
+  };
+
   ContactSimOptions options;
-  HandModel hand_model;
-  Handedness hand;
+  std::vector<Hand> hands;
   std::string xml;
   std::unique_ptr<mjModel, ModelDeleter> model;
   std::unique_ptr<mjData, DataDeleter> data;
 
-  int root_qpos = 0, root_dof = 0;
-  int mocap = 0;
-  std::array<int, kHandDofCount> dof_qpos{};
-  std::array<int, kHandDofCount> dof_actuator{};
-  std::array<int, kFingerCount> tip_body{};
-  std::vector<int> geom_finger;   // per geom: finger index, or -1
-  std::vector<bool> geom_hand;    // per geom: part of the proxy
-  std::vector<int> hand_bodies;   // the proxy: its root and everything under it
+  std::vector<int> geom_tip;      // per geom: hand * kFingerCount + finger for a distal phalanx, or -1
+  std::vector<int> geom_hand;     // per geom: the proxy it belongs to, or -1
   // Bodies of movable scene objects, which step() gives their weight.
   std::vector<int> weighted_bodies;
   Vec3 gravity_in_world = Vec3::Zero();
@@ -540,10 +631,8 @@ struct ContactSimulation::Impl {
   std::vector<bool> geom_on_free_object;  // per geom: part of a movable scene object
   std::vector<int> free_bodies;          // free scene objects, scene order
   std::vector<std::string> free_names;
+  std::vector<int> collider_geom, collider_mocap;  // per slot
 
-  Pose target_wrist;
-  HandAngles target_angles{};
-  std::array<FingertipContact, kFingerCount> tips{};
   ContactSimStats stats;
   std::uint64_t rejected_targets = 0;
   std::array<int, mjNWARNING> warnings_seen{};
@@ -554,58 +643,62 @@ struct ContactSimulation::Impl {
   };
   std::vector<Spring> springs;  // sized once by set_object_spring, never in step()
 
-  Impl(ContactSimOptions o, const HandModel& hm, Handedness h) : options(std::move(o)), hand_model(hm), hand(h) {}
+  explicit Impl(ContactSimOptions o) : options(std::move(o)) {}
 
-  void write_hand_state(const Pose& T_world_wrist, const HandAngles& angles) {
-    mjtNum* qpos = data->qpos + root_qpos;
+  void write_hand_state(const Hand& hd, const Pose& T_world_wrist, const HandAngles& angles) {
+    mjtNum* qpos = data->qpos + hd.root_qpos;
     for (int k = 0; k < 3; ++k) qpos[k] = T_world_wrist.p[k];
     const Quat q = T_world_wrist.q.normalized();
     qpos[3] = q.w();
     qpos[4] = q.x();
     qpos[5] = q.y();
     qpos[6] = q.z();
-    const HandAngles clamped = hand_model.limits().clamp(angles);
-    for (std::size_t i = 0; i < kHandDofCount; ++i) data->qpos[dof_qpos[i]] = clamped[i];
-    for (int k = 0; k < 6; ++k) data->qvel[root_dof + k] = 0.0;
+    const HandAngles clamped = hd.model.limits().clamp(angles);
+    for (std::size_t i = 0; i < kHandDofCount; ++i) data->qpos[hd.dof_qpos[i]] = clamped[i];
+    for (int k = 0; k < 6; ++k) data->qvel[hd.root_dof + k] = 0.0;
     for (std::size_t i = 0; i < kHandDofCount; ++i) {
-      data->qvel[model->jnt_dofadr[model->actuator_trnid[2 * dof_actuator[i]]]] = 0.0;
+      data->qvel[model->jnt_dofadr[model->actuator_trnid[2 * hd.dof_actuator[i]]]] = 0.0;
     }
   }
 
-  Pose proxy_wrist() const {
-    const mjtNum* qpos = data->qpos + root_qpos;
+  Pose proxy_wrist(const Hand& hd) const {
+    const mjtNum* qpos = data->qpos + hd.root_qpos;
     return {quat_from(qpos + 3).normalized(), vec_from(qpos)};
   }
 
+  void set_mocap(int mocap, const Pose& T) {
+    for (int k = 0; k < 3; ++k) data->mocap_pos[3 * mocap + k] = T.p[k];
+    data->mocap_quat[4 * mocap + 0] = T.q.w();
+    data->mocap_quat[4 * mocap + 1] = T.q.x();
+    data->mocap_quat[4 * mocap + 2] = T.q.y();
+    data->mocap_quat[4 * mocap + 3] = T.q.z();
+  }
+
   // The leash: the weld pulls toward a point at most max_offset from the proxy.
-  void place_target() {
-    const Pose proxy = proxy_wrist();
-    Vec3 offset = target_wrist.p - proxy.p;
+  void place_target(Hand& hd) {
+    const Pose proxy = proxy_wrist(hd);
+    Vec3 offset = hd.target_wrist.p - proxy.p;
     bool leashed = false;
     const double dist = offset.norm();
     if (dist > options.coupling.wrist_max_offset_m) {
       offset *= options.coupling.wrist_max_offset_m / dist;
       leashed = true;
     }
-    Quat q = target_wrist.q;
-    const double angle = proxy.q.angularDistance(target_wrist.q);
+    Quat q = hd.target_wrist.q;
+    const double angle = proxy.q.angularDistance(hd.target_wrist.q);
     if (angle > options.coupling.wrist_max_offset_rad) {
-      q = proxy.q.slerp(options.coupling.wrist_max_offset_rad / angle, target_wrist.q);
+      q = proxy.q.slerp(options.coupling.wrist_max_offset_rad / angle, hd.target_wrist.q);
       leashed = true;
     }
     if (leashed) ++stats.leash_engaged_steps;
-    const Vec3 p = proxy.p + offset;
-    for (int k = 0; k < 3; ++k) data->mocap_pos[3 * mocap + k] = p[k];
-    data->mocap_quat[4 * mocap + 0] = q.w();
-    data->mocap_quat[4 * mocap + 1] = q.x();
-    data->mocap_quat[4 * mocap + 2] = q.y();
-    data->mocap_quat[4 * mocap + 3] = q.z();
+    set_mocap(hd.mocap, {q, proxy.p + offset});
   }
 
-  bool hand_touches_anything() const {
+  bool hand_touches_anything(std::size_t h) const {
+    const int hi = static_cast<int>(h);
     for (int i = 0; i < data->ncon; ++i) {
       const mjContact& c = data->contact[i];
-      if (geom_hand[static_cast<std::size_t>(c.geom1)] || geom_hand[static_cast<std::size_t>(c.geom2)]) return true;
+      if (geom_hand[static_cast<std::size_t>(c.geom1)] == hi || geom_hand[static_cast<std::size_t>(c.geom2)] == hi) return true;
     }
     return false;
   }
@@ -620,17 +713,22 @@ struct ContactSimulation::Impl {
   }
 
   void update_fingertips() {
-    std::array<Vec3, kFingerCount> f_world, f_on_pad;
+    constexpr std::size_t kTips = kMaxProxyHands * kFingerCount;
+    std::array<Vec3, kTips> f_world, f_on_pad;
     f_world.fill(Vec3::Zero());
     f_on_pad.fill(Vec3::Zero());
-    std::array<Quat, kFingerCount> q_tip_world;
-    for (std::size_t fi = 0; fi < kFingerCount; ++fi) q_tip_world[fi] = quat_from(data->xquat + 4 * tip_body[fi]).conjugate();
-    std::array<int, kFingerCount> count{};
-    std::array<double, kFingerCount> depth{}, pressing{}, pressing_objects{};
+    std::array<Quat, kTips> q_tip_world;
+    for (std::size_t h = 0; h < hands.size(); ++h) {
+      for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+        q_tip_world[h * kFingerCount + fi] = quat_from(data->xquat + 4 * hands[h].tip_body[fi]).conjugate();
+      }
+    }
+    std::array<int, kTips> count{};
+    std::array<double, kTips> depth{}, pressing{}, pressing_objects{};
     for (int i = 0; i < data->ncon; ++i) {
       const mjContact& c = data->contact[i];
-      const int f1 = geom_finger[static_cast<std::size_t>(c.geom1)];
-      const int f2 = geom_finger[static_cast<std::size_t>(c.geom2)];
+      const int f1 = geom_tip[static_cast<std::size_t>(c.geom1)];
+      const int f2 = geom_tip[static_cast<std::size_t>(c.geom2)];
       if (f1 < 0 && f2 < 0) continue;
       mjtNum local[6];
       mj_contactForce(model.get(), data.get(), i, local);
@@ -640,30 +738,33 @@ struct ContactSimulation::Impl {
       for (int r = 0; r < 3; ++r) f += local[r] * Vec3(c.frame[3 * r], c.frame[3 * r + 1], c.frame[3 * r + 2]);
       const Vec3 n(c.frame[0], c.frame[1], c.frame[2]);
       // `into` is the way the normal force pushes the finger: +n on geom2, -n on geom1.
-      const auto add = [&](int finger, const Vec3& force, const Vec3& into, int other_geom) {
-        const auto fi = static_cast<std::size_t>(finger);
-        f_world[fi] += force;
-        f_on_pad[fi] += felt_on_pad(q_tip_world[fi] * force, q_tip_world[fi] * into).in_tip_frame();
-        ++count[fi];
-        depth[fi] = std::max(depth[fi], -c.dist);
-        pressing[fi] += local[0];
-        if (geom_on_free_object[static_cast<std::size_t>(other_geom)]) pressing_objects[fi] += local[0];
+      const auto add = [&](int tip, const Vec3& force, const Vec3& into, int other_geom) {
+        const auto ti = static_cast<std::size_t>(tip);
+        f_world[ti] += force;
+        f_on_pad[ti] += felt_on_pad(q_tip_world[ti] * force, q_tip_world[ti] * into).in_tip_frame();
+        ++count[ti];
+        depth[ti] = std::max(depth[ti], -c.dist);
+        pressing[ti] += local[0];
+        if (geom_on_free_object[static_cast<std::size_t>(other_geom)]) pressing_objects[ti] += local[0];
       };
       if (f2 >= 0) add(f2, f, n, c.geom1);
       if (f1 >= 0) add(f1, -f, -n, c.geom2);
     }
     const double dt = options.timestep_s, tau = options.force_filter_time_constant_s;
     const double alpha = dt / (tau + dt);
-    for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
-      FingertipContact& tip = tips[fi];
-      tip.f_in_world = f_world[fi];
-      tip.raw = FingertipForce::from_tip_frame(q_tip_world[fi] * f_world[fi]);
-      low_pass(tip.force, tip.raw, alpha);
-      low_pass(tip.on_pad, FingertipForce::from_tip_frame(f_on_pad[fi]), alpha);
-      tip.contact_normal_n += alpha * (pressing[fi] - tip.contact_normal_n);
-      tip.object_normal_n += alpha * (pressing_objects[fi] - tip.object_normal_n);
-      tip.contact_count = count[fi];
-      tip.max_penetration_m = depth[fi];
+    for (std::size_t h = 0; h < hands.size(); ++h) {
+      for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+        const std::size_t ti = h * kFingerCount + fi;
+        FingertipContact& tip = hands[h].tips[fi];
+        tip.f_in_world = f_world[ti];
+        tip.raw = FingertipForce::from_tip_frame(q_tip_world[ti] * f_world[ti]);
+        low_pass(tip.force, tip.raw, alpha);
+        low_pass(tip.on_pad, FingertipForce::from_tip_frame(f_on_pad[ti]), alpha);
+        tip.contact_normal_n += alpha * (pressing[ti] - tip.contact_normal_n);
+        tip.object_normal_n += alpha * (pressing_objects[ti] - tip.object_normal_n);
+        tip.contact_count = count[ti];
+        tip.max_penetration_m = depth[ti];
+      }
     }
   }
 
@@ -674,45 +775,60 @@ struct ContactSimulation::Impl {
     buf[name.size()] = '\0';
     return mj_name2id(model.get(), mjOBJ_BODY, buf);
   }
+
+  bool is_hand_body(int b) const {
+    for (const Hand& hd : hands) {
+      int r = b;
+      while (r != 0 && r != hd.root_body) r = model->body_parentid[r];
+      if (r == hd.root_body) return true;
+    }
+    return false;
+  }
 };
 
 Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model, Handedness hand,
                                                     const HapticScene& scene, const ContactSimOptions& options) {
+  const ProxyHandSpec one[] = {{hand_model, hand}};
+  return create(one, scene, options);
+}
+
+Result<ContactSimulation> ContactSimulation::create(std::span<const ProxyHandSpec> hands, const HapticScene& scene,
+                                                    const ContactSimOptions& options) {
   install_mujoco_log_hooks();
-  auto xml = generate_mjcf(hand_model, hand, scene, options);
+  auto xml = generate_mjcf(hands, scene, options);
   if (!xml) return xml.error();
   auto model = compile(*xml);
   if (!model) return model.error();
-  auto impl = std::make_unique<Impl>(options, hand_model, hand);
+  auto impl = std::make_unique<Impl>(options);
   impl->xml = std::move(*xml);
   impl->model = std::move(*model);
   impl->data.reset(mj_makeData(impl->model.get()));
   if (!impl->data) return make_error(Errc::io_error, "MuJoCo could not allocate its simulation data");
   const mjModel* m = impl->model.get();
+  const auto id = [m](mjtObj type, const std::string& name) { return mj_name2id(m, type, name.c_str()); };
 
-  const int root_joint = mj_name2id(m, mjOBJ_JOINT, "proxy_root");
-  impl->root_qpos = m->jnt_qposadr[root_joint];
-  impl->root_dof = m->jnt_dofadr[root_joint];
-  impl->mocap = m->body_mocapid[mj_name2id(m, mjOBJ_BODY, "target_wrist")];
-  for (std::size_t dof = 0; dof < kHandDofCount; ++dof) {
-    const std::string name = dof_joint_name(dof);
-    impl->dof_qpos[dof] = m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, name.c_str())];
-    impl->dof_actuator[dof] = mj_name2id(m, mjOBJ_ACTUATOR, (name + "_servo").c_str());
-  }
-  impl->geom_finger.assign(static_cast<std::size_t>(m->ngeom), -1);
-  impl->geom_hand.assign(static_cast<std::size_t>(m->ngeom), false);
+  impl->geom_tip.assign(static_cast<std::size_t>(m->ngeom), -1);
+  impl->geom_hand.assign(static_cast<std::size_t>(m->ngeom), -1);
   impl->object_body_of_geom.assign(static_cast<std::size_t>(m->ngeom), -1);
-  for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
-    const std::string distal = "proxy_" + std::string(to_string(static_cast<Finger>(fi))) + "_distal";
-    impl->tip_body[fi] = mj_name2id(m, mjOBJ_BODY, distal.c_str());
-    impl->geom_finger[static_cast<std::size_t>(mj_name2id(m, mjOBJ_GEOM, distal.c_str()))] = static_cast<int>(fi);
-  }
-  const int proxy_root_body = mj_name2id(m, mjOBJ_BODY, "proxy_wrist");
-  for (int b = 1; b < m->nbody; ++b) {
-    // A proxy body is the root or any body under it.
-    int r = b;
-    while (r != 0 && r != proxy_root_body) r = m->body_parentid[r];
-    if (r == proxy_root_body) impl->hand_bodies.push_back(b);
+  for (std::size_t h = 0; h < hands.size(); ++h) {
+    const std::string pre = hand_prefix(hands, h);
+    Impl::Hand hd(hands[h].model, hands[h].hand);
+    const int root_joint = id(mjOBJ_JOINT, pre + "proxy_root");
+    hd.root_qpos = m->jnt_qposadr[root_joint];
+    hd.root_dof = m->jnt_dofadr[root_joint];
+    hd.mocap = m->body_mocapid[id(mjOBJ_BODY, pre + "target_wrist")];
+    hd.root_body = id(mjOBJ_BODY, pre + "proxy_wrist");
+    for (std::size_t dof = 0; dof < kHandDofCount; ++dof) {
+      const std::string name = dof_joint_name(pre, dof);
+      hd.dof_qpos[dof] = m->jnt_qposadr[id(mjOBJ_JOINT, name)];
+      hd.dof_actuator[dof] = id(mjOBJ_ACTUATOR, name + "_servo");
+    }
+    for (std::size_t fi = 0; fi < kFingerCount; ++fi) {
+      const std::string distal = pre + "proxy_" + std::string(to_string(static_cast<Finger>(fi))) + "_distal";
+      hd.tip_body[fi] = id(mjOBJ_BODY, distal);
+      impl->geom_tip[static_cast<std::size_t>(id(mjOBJ_GEOM, distal))] = static_cast<int>(h * kFingerCount + fi);
+    }
+    impl->hands.push_back(std::move(hd));
   }
   // The scene object a body belongs to: its ancestor just below the world.
   const auto top_level_body = [m](int b) {
@@ -721,15 +837,16 @@ Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model,
   };
   for (int g = 0; g < m->ngeom; ++g) {
     const int b = m->geom_bodyid[g];
-    const bool is_hand = std::find(impl->hand_bodies.begin(), impl->hand_bodies.end(), b) != impl->hand_bodies.end();
-    impl->geom_hand[static_cast<std::size_t>(g)] = is_hand;
-    if (is_hand || b == 0) continue;
+    for (std::size_t h = 0; h < impl->hands.size(); ++h) {
+      if (b != 0 && top_level_body(b) == impl->hands[h].root_body) impl->geom_hand[static_cast<std::size_t>(g)] = static_cast<int>(h);
+    }
+    if (impl->geom_hand[static_cast<std::size_t>(g)] >= 0 || b == 0) continue;
     // A geom of a nested body (a plate's ring) belongs to the scene object.
     impl->object_body_of_geom[static_cast<std::size_t>(g)] = top_level_body(b);
   }
   for (const SceneObject& o : scene.objects) {
     if (o.fixed) continue;
-    const int b = mj_name2id(m, mjOBJ_BODY, o.name.c_str());
+    const int b = id(mjOBJ_BODY, o.name);
     if (b > 0) {
       impl->free_bodies.push_back(b);
       impl->free_names.push_back(o.name);
@@ -748,10 +865,19 @@ Result<ContactSimulation> ContactSimulation::create(const HandModel& hand_model,
     impl->geom_on_free_object[static_cast<std::size_t>(g)] =
         b > 0 && std::find(impl->free_bodies.begin(), impl->free_bodies.end(), b) != impl->free_bodies.end();
   }
+  for (int k = 0; k < options.collider_slots; ++k) {
+    const std::string name = "collider_" + std::to_string(k);
+    impl->collider_geom.push_back(id(mjOBJ_GEOM, name));
+    impl->collider_mocap.push_back(m->body_mocapid[id(mjOBJ_BODY, name)]);
+  }
   for (int k = 0; k < mjNWARNING; ++k) impl->warnings_seen[static_cast<std::size_t>(k)] = impl->data->warning[k].number;
 
   ContactSimulation sim(std::move(impl));
-  sim.reset_hand(Pose{Quat::Identity(), Vec3(0.0, 1.2, -0.3)}, HandAngles{});
+  for (std::size_t h = 0; h < sim.hand_count(); ++h) {
+    // Side by side, 20 cm apart when there are two.
+    const double x = sim.hand_count() == 1 ? 0.0 : (sim.hand(h) == Handedness::left ? -0.1 : 0.1);
+    sim.reset_hand(Pose{Quat::Identity(), Vec3(x, 1.2, -0.3)}, HandAngles{}, h);
+  }
   return sim;
 }
 
@@ -762,43 +888,48 @@ ContactSimulation::~ContactSimulation() = default;
 
 const std::string& ContactSimulation::mjcf() const { return impl_->xml; }
 
-void ContactSimulation::reset_hand(const Pose& T_world_wrist, const HandAngles& angles) noexcept {
+void ContactSimulation::reset_hand(const Pose& T_world_wrist, const HandAngles& angles, std::size_t h) noexcept {
   Impl& s = *impl_;
-  if (!finite_pose(T_world_wrist)) {
+  if (h >= s.hands.size() || !finite_pose(T_world_wrist)) {
     ++s.rejected_targets;
     return;
   }
-  s.target_wrist = {T_world_wrist.q.normalized(), T_world_wrist.p};
-  s.target_angles = s.hand_model.limits().clamp(angles);
-  s.write_hand_state(s.target_wrist, s.target_angles);
-  for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[s.dof_actuator[i]] = s.target_angles[i];
-  s.place_target();
+  Impl::Hand& hd = s.hands[h];
+  hd.target_wrist = {T_world_wrist.q.normalized(), T_world_wrist.p};
+  hd.target_angles = hd.model.limits().clamp(angles);
+  s.write_hand_state(hd, hd.target_wrist, hd.target_angles);
+  for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[hd.dof_actuator[i]] = hd.target_angles[i];
+  s.place_target(hd);
   mj_forward(s.model.get(), s.data.get());
-  for (auto& tip : s.tips) tip = FingertipContact{};
+  for (auto& tip : hd.tips) tip = FingertipContact{};
 }
 
-void ContactSimulation::set_target(const Pose& T_world_wrist, const HandAngles& angles) noexcept {
+void ContactSimulation::set_target(const Pose& T_world_wrist, const HandAngles& angles, std::size_t h) noexcept {
   Impl& s = *impl_;
-  bool finite = finite_pose(T_world_wrist);
+  bool finite = h < s.hands.size() && finite_pose(T_world_wrist);
   for (double a : angles) finite &= std::isfinite(a);
   if (!finite) {
     ++s.rejected_targets;
     return;
   }
-  s.target_wrist = {T_world_wrist.q.normalized(), T_world_wrist.p};
-  s.target_angles = s.hand_model.limits().clamp(angles);
+  Impl::Hand& hd = s.hands[h];
+  hd.target_wrist = {T_world_wrist.q.normalized(), T_world_wrist.p};
+  hd.target_angles = hd.model.limits().clamp(angles);
 }
 
 void ContactSimulation::step() noexcept {
   Impl& s = *impl_;
   const CouplingOptions& c = s.options.coupling;
-  if (c.resync_distance_m > 0.0 && (s.target_wrist.p - s.proxy_wrist().p).norm() > c.resync_distance_m &&
-      !s.hand_touches_anything()) {
-    s.write_hand_state(s.target_wrist, s.target_angles);
-    ++s.stats.resyncs;
+  for (std::size_t h = 0; h < s.hands.size(); ++h) {
+    Impl::Hand& hd = s.hands[h];
+    if (c.resync_distance_m > 0.0 && (hd.target_wrist.p - s.proxy_wrist(hd).p).norm() > c.resync_distance_m &&
+        !s.hand_touches_anything(h)) {
+      s.write_hand_state(hd, hd.target_wrist, hd.target_angles);
+      ++s.stats.resyncs;
+    }
+    for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[hd.dof_actuator[i]] = hd.target_angles[i];
+    s.place_target(hd);
   }
-  for (std::size_t i = 0; i < kHandDofCount; ++i) s.data->ctrl[s.dof_actuator[i]] = s.target_angles[i];
-  s.place_target();
   s.apply_weights();
   // A spring's body is a free object's, so apply_weights() has just reset it.
   for (const Impl::Spring& sp : s.springs) {
@@ -810,8 +941,8 @@ void ContactSimulation::step() noexcept {
   mj_step(s.model.get(), s.data.get());
   ++s.stats.steps;
 
-  // MuJoCo resets the whole state itself on a bad qacc/qpos; put the hand
-  // back where the user's is, and count it.
+  // MuJoCo resets the whole state itself on a bad qacc/qpos; put the hands
+  // back where the user's are, and count it.
   bool reset = false;
   for (int k : {mjWARN_BADQACC, mjWARN_BADQPOS, mjWARN_BADQVEL}) {
     if (s.data->warning[k].number != s.warnings_seen[static_cast<std::size_t>(k)]) {
@@ -821,7 +952,7 @@ void ContactSimulation::step() noexcept {
   }
   if (reset) {
     ++s.stats.instability_resets;
-    s.write_hand_state(s.target_wrist, s.target_angles);
+    for (const Impl::Hand& hd : s.hands) s.write_hand_state(hd, hd.target_wrist, hd.target_angles);
     mj_forward(s.model.get(), s.data.get());
   }
   s.update_fingertips();
@@ -831,30 +962,105 @@ void ContactSimulation::step() noexcept {
 TimeNs ContactSimulation::time_ns() const noexcept {
   return static_cast<TimeNs>(std::llround(impl_->data->time * 1e9));
 }
-Handedness ContactSimulation::hand() const noexcept { return impl_->hand; }
-const HandModel& ContactSimulation::hand_model() const noexcept { return impl_->hand_model; }
+std::size_t ContactSimulation::hand_count() const noexcept { return impl_->hands.size(); }
+int ContactSimulation::hand_index(Handedness side) const noexcept {
+  for (std::size_t h = 0; h < impl_->hands.size(); ++h) {
+    if (impl_->hands[h].side == side) return static_cast<int>(h);
+  }
+  return -1;
+}
+// Out-of-range hand indices read hand 0: accessors never fail in the loop.
+namespace {
+std::size_t proxy_index_in_range(std::size_t h, std::size_t n) { return h < n ? h : 0; }
+}  // namespace
+Handedness ContactSimulation::hand(std::size_t h) const noexcept { return impl_->hands[proxy_index_in_range(h, hand_count())].side; }
+const HandModel& ContactSimulation::hand_model(std::size_t h) const noexcept {
+  return impl_->hands[proxy_index_in_range(h, hand_count())].model;
+}
 
-Pose ContactSimulation::proxy_wrist() const noexcept { return impl_->proxy_wrist(); }
+Pose ContactSimulation::proxy_wrist(std::size_t h) const noexcept {
+  return impl_->proxy_wrist(impl_->hands[proxy_index_in_range(h, hand_count())]);
+}
 
-HandAngles ContactSimulation::proxy_angles() const noexcept {
+HandAngles ContactSimulation::proxy_angles(std::size_t h) const noexcept {
+  const Impl::Hand& hd = impl_->hands[proxy_index_in_range(h, hand_count())];
   HandAngles a;
-  for (std::size_t i = 0; i < kHandDofCount; ++i) a[i] = impl_->data->qpos[impl_->dof_qpos[i]];
+  for (std::size_t i = 0; i < kHandDofCount; ++i) a[i] = impl_->data->qpos[hd.dof_qpos[i]];
   return a;
 }
 
-HandPose ContactSimulation::proxy_pose(TimeNs time_ns) const {
-  return impl_->hand_model.forward(impl_->hand, proxy_angles(), proxy_wrist(), time_ns);
+HandPose ContactSimulation::proxy_pose(TimeNs time_ns, std::size_t h) const {
+  const Impl::Hand& hd = impl_->hands[proxy_index_in_range(h, hand_count())];
+  return hd.model.forward(hd.side, proxy_angles(h), impl_->proxy_wrist(hd), time_ns);
 }
 
-const std::array<FingertipContact, kFingerCount>& ContactSimulation::fingertips() const noexcept { return impl_->tips; }
-const FingertipContact& ContactSimulation::fingertip(Finger finger) const noexcept {
-  return impl_->tips[static_cast<std::size_t>(finger)];
+const std::array<FingertipContact, kFingerCount>& ContactSimulation::fingertips(std::size_t h) const noexcept {
+  return impl_->hands[proxy_index_in_range(h, hand_count())].tips;
+}
+const FingertipContact& ContactSimulation::fingertip(Finger finger, std::size_t h) const noexcept {
+  return fingertips(h)[static_cast<std::size_t>(finger)];
+}
+
+int ContactSimulation::collider_slot_count() const noexcept { return static_cast<int>(impl_->collider_geom.size()); }
+
+bool ContactSimulation::set_collider(int slot, const ColliderShape& o, const Pose& T_world_collider) noexcept {
+  Impl& s = *impl_;
+  if (slot < 0 || slot >= collider_slot_count() || !finite_pose(T_world_collider)) return false;
+  if (!o.half_extents_m.allFinite() || !std::isfinite(o.radius_m) || !std::isfinite(o.half_length_m) ||
+      !std::isfinite(o.friction)) {
+    return false;
+  }
+  mjModel* m = s.model.get();
+  const int g = s.collider_geom[static_cast<std::size_t>(slot)];
+  mjtNum* size = m->geom_size + 3 * g;
+  switch (o.shape) {
+    case ShapeKind::sphere:
+      m->geom_type[g] = mjGEOM_SPHERE;
+      size[0] = o.radius_m;
+      m->geom_rbound[g] = o.radius_m;
+      break;
+    case ShapeKind::box:
+      m->geom_type[g] = mjGEOM_BOX;
+      for (int k = 0; k < 3; ++k) size[k] = o.half_extents_m[k];
+      m->geom_rbound[g] = o.half_extents_m.norm();
+      break;
+    case ShapeKind::capsule:
+      m->geom_type[g] = mjGEOM_CAPSULE;
+      size[0] = o.radius_m;
+      size[1] = o.half_length_m;
+      m->geom_rbound[g] = o.radius_m + o.half_length_m;
+      break;
+    case ShapeKind::cylinder:
+      m->geom_type[g] = mjGEOM_CYLINDER;
+      size[0] = o.radius_m;
+      size[1] = o.half_length_m;
+      m->geom_rbound[g] = std::hypot(o.radius_m, o.half_length_m);
+      break;
+    default: return false;
+  }
+  m->geom_friction[3 * g] = o.friction;
+  s.set_mocap(s.collider_mocap[static_cast<std::size_t>(slot)],
+              {T_world_collider.q.normalized(), T_world_collider.p});
+  return true;
+}
+
+bool ContactSimulation::move_collider(int slot, const Pose& T_world_collider) noexcept {
+  Impl& s = *impl_;
+  if (slot < 0 || slot >= collider_slot_count() || !finite_pose(T_world_collider)) return false;
+  s.set_mocap(s.collider_mocap[static_cast<std::size_t>(slot)], {T_world_collider.q.normalized(), T_world_collider.p});
+  return true;
+}
+
+void ContactSimulation::remove_collider(int slot) noexcept {
+  Impl& s = *impl_;
+  if (slot < 0 || slot >= collider_slot_count()) return;
+  s.set_mocap(s.collider_mocap[static_cast<std::size_t>(slot)], {Quat::Identity(), Vec3(0.0, kParkedY, 0.0)});
 }
 
 Result<Pose> ContactSimulation::object_pose(std::string_view name) const {
   const Impl& s = *impl_;
   const int b = s.body_of(name);
-  if (b <= 0 || std::find(s.hand_bodies.begin(), s.hand_bodies.end(), b) != s.hand_bodies.end()) {
+  if (b <= 0 || s.is_hand_body(b)) {
     return make_error(Errc::not_found, "no scene object named '" + std::string(name) + "'");
   }
   return Pose{quat_from(s.data->xquat + 4 * b), vec_from(s.data->xpos + 3 * b)};
@@ -921,7 +1127,7 @@ Vec3 ContactSimulation::hand_force_on_object(std::string_view name) const {
     const mjContact& c = s.data->contact[i];
     const auto g1 = static_cast<std::size_t>(c.geom1), g2 = static_cast<std::size_t>(c.geom2);
     const bool obj1 = s.object_body_of_geom[g1] == b, obj2 = s.object_body_of_geom[g2] == b;
-    if (!((obj1 && s.geom_hand[g2]) || (obj2 && s.geom_hand[g1]))) continue;
+    if (!((obj1 && s.geom_hand[g2] >= 0) || (obj2 && s.geom_hand[g1] >= 0))) continue;
     mjtNum local[6];
     mj_contactForce(s.model.get(), s.data.get(), i, local);
     Vec3 f = Vec3::Zero();
@@ -937,7 +1143,7 @@ const ContactSimOptions& ContactSimulation::options() const noexcept { return im
 std::string ContactSimulation::describe_model() const {
   const mjModel* m = impl_->model.get();
   std::ostringstream s;
-  s << m->nbody << " bodies, " << m->ngeom << " geoms, " << m->nv << " DOFs, " << m->nu << " joint servos; "
+  s << impl_->hands.size() << (impl_->hands.size() == 1 ? " proxy hand, " : " proxy hands, ") << m->nbody << " bodies, " << m->ngeom << " geoms, " << m->nv << " DOFs, " << m->nu << " joint servos; "
     << impl_->options.describe();
   return s.str();
 }

@@ -80,16 +80,21 @@ Result<std::unique_ptr<ServoLoop>> ServoLoop::create(ContactSimulation simulatio
                                                      ServoLoopOptions options, const Clock& clock) {
   if (auto s = options.validate(); !s) return s.error();
   if (channels.size() > kMaxServoChannels) {
-    return make_error(Errc::invalid_argument, "a servo loop drives at most one device per finger (5 channels)");
+    return make_error(Errc::invalid_argument, "a servo loop drives at most one device per finger of each hand (10 channels)");
   }
   for (std::size_t i = 0; i < channels.size(); ++i) {
     if (!channels[i].model) {
       return make_error(Errc::invalid_argument, "servo channel " + std::to_string(i) + " has no device model");
     }
+    if (channels[i].hand >= simulation.hand_count()) {
+      return make_error(Errc::invalid_argument, "servo channel " + std::to_string(i) + " is on hand " +
+                                                    std::to_string(channels[i].hand) + ", but the simulation has " +
+                                                    std::to_string(simulation.hand_count()) + " proxy hand(s)");
+    }
     for (std::size_t j = 0; j < i; ++j) {
-      if (channels[j].finger == channels[i].finger) {
+      if (channels[j].finger == channels[i].finger && channels[j].hand == channels[i].hand) {
         return make_error(Errc::invalid_argument, "two servo channels drive the same finger (" +
-                                                      std::to_string(static_cast<int>(channels[i].finger)) + ")");
+                                                      std::string(to_string(channels[i].finger)) + ") of one hand");
       }
     }
   }
@@ -116,12 +121,20 @@ void ServoLoop::submit_tracked_hand(const HandPose& pose) {
   }
   // The proxy's own model (the user's bone lengths) gives the angles; it is
   // immutable, so reading it here while the loop runs is safe.
-  const InverseKinematicsResult ik = simulation_.hand_model().inverse(pose);
-  submit_tracked_hand(pose.time_ns, ik.T_world_wrist, ik.angles);
+  const int h = simulation_.hand_index(pose.hand);
+  if (h < 0) {
+    rejected_hands_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  const auto hand = static_cast<std::size_t>(h);
+  const InverseKinematicsResult ik = simulation_.hand_model(hand).inverse(pose);
+  submit_tracked_hand(pose.time_ns, ik.T_world_wrist, ik.angles, hand);
 }
 
-void ServoLoop::submit_tracked_hand(TimeNs time_ns, const Pose& T_world_wrist, const HandAngles& angles) {
-  if (!T_world_wrist.p.allFinite() || !T_world_wrist.q.coeffs().allFinite() || !finite_angles(angles)) {
+void ServoLoop::submit_tracked_hand(TimeNs time_ns, const Pose& T_world_wrist, const HandAngles& angles,
+                                    std::size_t hand) {
+  if (hand >= simulation_.hand_count() || !T_world_wrist.p.allFinite() || !T_world_wrist.q.coeffs().allFinite() ||
+      !finite_angles(angles)) {
     rejected_hands_.fetch_add(1, std::memory_order_relaxed);
     return;
   }
@@ -132,7 +145,7 @@ void ServoLoop::submit_tracked_hand(TimeNs time_ns, const Pose& T_world_wrist, c
   if (options_.remove_finger_abduction) {
     for (Finger f : {Finger::index, Finger::middle, Finger::ring, Finger::little}) t.angles[first_dof_of(f) + 1] = 0.0;
   }
-  targets_.publish(t);
+  targets_[hand].publish(t);
 }
 
 void ServoLoop::engage(TimeNs now) noexcept {
@@ -147,33 +160,62 @@ void ServoLoop::disengage_and_zero(TimeNs now) noexcept {
 }
 
 void ServoLoop::tick(TimeNs now) noexcept {
-  Target target;
-  if (targets_.fetch(target)) {
-    simulation_.set_target(target.T_world_wrist, target.angles);
-    last_target_ns_ = target.time_ns;
-    have_target_ = true;
+  switch (output_request_.exchange(kRequestNone, std::memory_order_acq_rel)) {
+    case kRequestOn: engage(now); break;
+    case kRequestOff: disengage_and_zero(now); break;
+    default: break;
   }
-  if (!have_target_ || now - last_target_ns_ > options_.tracked_hand_timeout_ns) {
-    stale_ticks_.fetch_add(1, std::memory_order_relaxed);
+  if (colliders_.fetch(collider_scratch_)) {
+    for (int k = 0; k < simulation_.collider_slot_count(); ++k) {
+      const ColliderTable::Slot& slot = collider_scratch_.slots[static_cast<std::size_t>(k)];
+      if (!slot.active || !simulation_.set_collider(k, slot.shape, slot.T_world_collider)) simulation_.remove_collider(k);
+    }
   }
-  simulation_.step();
+  const std::size_t hands = simulation_.hand_count();
+  bool stale = false;
+  for (std::size_t h = 0; h < hands; ++h) {
+    Target target;
+    if (targets_[h].fetch(target)) {
+      simulation_.set_target(target.T_world_wrist, target.angles, h);
+      last_target_ns_[h] = target.time_ns;
+      have_target_[h] = true;
+    }
+    stale |= !have_target_[h] || now - last_target_ns_[h] > options_.tracked_hand_timeout_ns;
+  }
+  if (stale) stale_ticks_.fetch_add(1, std::memory_order_relaxed);
+  const bool simulating = simulate_.load(std::memory_order_acquire);
+  if (simulating) simulation_.step();
 
   ServoSnapshot& snap = scratch_;
+  snap.simulating = simulating;
   snap.object_count = std::min(simulation_.free_object_count(), ServoSnapshot::kMaxObjects);
   for (std::size_t i = 0; i < snap.object_count; ++i) snap.object_poses[i] = simulation_.free_object_pose(i);
-  for (std::size_t f = 0; f < kFingerCount; ++f) {
-    snap.contact[f] = simulation_.fingertips()[f].force;
-    snap.on_pad[f] = simulation_.fingertips()[f].on_pad;
-    snap.contact_normal_n[f] = simulation_.fingertips()[f].contact_normal_n;
-    snap.object_normal_n[f] = simulation_.fingertips()[f].object_normal_n;
+  snap.hand_count = hands;
+  for (std::size_t h = 0; h < hands; ++h) {
+    ServoSnapshot::Hand& sh = snap.hands[h];
+    sh.side = simulation_.hand(h);
+    for (std::size_t f = 0; f < kFingerCount; ++f) {
+      const FingertipContact& tip = simulation_.fingertips(h)[f];
+      sh.contact[f] = simulating ? tip.force : FingertipForce{};
+      sh.on_pad[f] = simulating ? tip.on_pad : FingertipForce{};
+      sh.contact_normal_n[f] = simulating ? tip.contact_normal_n : 0.0;
+      sh.object_normal_n[f] = simulating ? tip.object_normal_n : 0.0;
+    }
   }
   for (std::size_t i = 0; i < channels_.size(); ++i) {
     const ServoChannel& c = channels_[i];
     SafetyGate& gate = gates_[i];
     // The device presses on the pad: it gets the contacts as the pad feels
     // them, so a press on the tip's end is rendered, not read as a pull.
-    const FingertipForce desired =
-        options_.haptics_enabled ? scaled(simulation_.fingertip(c.finger).on_pad, options_.force_scale) : FingertipForce{};
+    // The scale is for simulated contact only: extra forces are newtons as asked.
+    FingertipForce desired = scaled(snap.hands[c.hand].on_pad[static_cast<std::size_t>(c.finger)], options_.force_scale);
+    if (extra_) {
+      const FingertipForce e = extra_->force(i, now);
+      desired.normal_n += e.normal_n;
+      desired.shear_x_n += e.shear_x_n;
+      desired.shear_z_n += e.shear_z_n;
+    }
+    if (!options_.haptics_enabled) desired = FingertipForce{};
     gate.command(desired, now);
     const FingertipForce out = gate.output(now);
     const bool enabled = gate.engaged();
@@ -181,6 +223,7 @@ void ServoLoop::tick(TimeNs now) noexcept {
     if (c.sink) c.sink->send(motors, out, enabled, now);
     ServoSnapshot::Channel& sc = snap.channels[i];
     sc.finger = c.finger;
+    sc.hand = c.hand;
     sc.commanded = out;
     sc.measured = c.sink ? c.sink->measured() : out;
     sc.motors = motors;
@@ -189,7 +232,7 @@ void ServoLoop::tick(TimeNs now) noexcept {
   }
   snap.time_ns = now;
   snap.tick = ticks_.fetch_add(1, std::memory_order_relaxed) + 1;
-  snap.proxy = simulation_.proxy_pose(now);
+  for (std::size_t h = 0; h < hands; ++h) snap.hands[h].proxy = simulation_.proxy_pose(now, h);
   snapshots_.publish(snap);
 }
 

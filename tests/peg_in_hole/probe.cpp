@@ -135,8 +135,8 @@ int main(int argc, char** argv) {
             const auto& sn = w2.snapshot();
             const Vec3 ax = peg_axis(w2.peg_pose());
             std::printf("        %-7s s=%.3f grip %.2f tips T%.2f I%.2f M%.2f ax(%.2f %.2f %.2f) peg(%.3f %.3f %.3f)\n", ph.c_str(),
-                        pu.closure(), w2.filtered_grasp_force_n(), sn.contact[0].normal_n, sn.contact[1].normal_n,
-                        sn.contact[2].normal_n, ax.x(), ax.y(), ax.z(), w2.peg_pose().p.x(), w2.peg_pose().p.y(),
+                        pu.closure(), w2.filtered_grasp_force_n(), sn.hands[0].contact[0].normal_n, sn.hands[0].contact[1].normal_n,
+                        sn.hands[0].contact[2].normal_n, ax.x(), ax.y(), ax.z(), w2.peg_pose().p.x(), w2.peg_pose().p.y(),
                         w2.peg_pose().p.z());
           }
           if (ev.kind == PegEvent::Kind::inserted) break;
@@ -306,19 +306,19 @@ int main(int argc, char** argv) {
       std::printf("%6.3f s=%.2f %-8s ev%d peg(%.3f %.3f %.3f) ax(%.2f %.2f %.2f) wrist(%.3f %.3f %.3f) tips T%.2f I%.2f M%.2f felt %.2f %.2f %.2f filt %.2f ins d=%.3f r=%.4f\n",
         1e-9*world.now_ns(), user.closure(), ph.c_str(), (int)ev.kind, pp.p.x(), pp.p.y(), pp.p.z(), ax.x(), ax.y(), ax.z(),
         cmd.T_world_wrist.p.x(), cmd.T_world_wrist.p.y(), cmd.T_world_wrist.p.z(),
-        s.contact[0].normal_n, s.contact[1].normal_n, s.contact[2].normal_n,
+        s.hands[0].contact[0].normal_n, s.hands[0].contact[1].normal_n, s.hands[0].contact[2].normal_n,
         p.felt_normal_n[0], p.felt_normal_n[1], p.felt_normal_n[2], world.filtered_grasp_force_n(), ins.depth_m, ins.radial_offset_m);
       last = ph;
       if (getenv("HF")) { Vec3 hf = world.servo().simulation().hand_force_on_object("peg"); std::printf("      hand->peg (%.2f %.2f %.2f) tip raw T%.2f I%.2f M%.2f cnt %d %d %d\n", hf.x(), hf.y(), hf.z(),
         world.servo().simulation().fingertip(Finger::thumb).raw.normal_n, world.servo().simulation().fingertip(Finger::index).raw.normal_n, world.servo().simulation().fingertip(Finger::middle).raw.normal_n,
         world.servo().simulation().fingertip(Finger::thumb).contact_count, world.servo().simulation().fingertip(Finger::index).contact_count, world.servo().simulation().fingertip(Finger::middle).contact_count); }
-      if (getenv("WRIST")) { const Pose& pw = s.proxy.joint(HandJoint::wrist); const Vec3 dp = pw.p - cmd.T_world_wrist.p;
+      if (getenv("WRIST")) { const Pose& pw = s.hands[0].proxy.joint(HandJoint::wrist); const Vec3 dp = pw.p - cmd.T_world_wrist.p;
         const double ang = 2.0 * std::acos(std::min(1.0, std::abs(pw.q.dot(cmd.T_world_wrist.q))));
         std::printf("      proxy wrist off (%.4f %.4f %.4f) m, %.2f deg\n", dp.x(), dp.y(), dp.z(), ang * 57.2958); }
       if (getenv("FW")) for (int f = 0; f < 3; ++f) { const auto& tip = world.servo().simulation().fingertip(static_cast<Finger>(f));
         std::printf("      f%d world(%.2f %.2f %.2f) raw n %.2f sx %.2f sz %.2f contact normal %.2f\n", f, tip.f_in_world.x(), tip.f_in_world.y(), tip.f_in_world.z(), tip.raw.normal_n, tip.raw.shear_x_n, tip.raw.shear_z_n, tip.contact_normal_n); }
       if (getenv("PADS")) for (int f = 0; f < 3; ++f) {
-        const Pose& tip = s.proxy.joint(tip_of(static_cast<Finger>(f)));
+        const Pose& tip = s.hands[0].proxy.joint(tip_of(static_cast<Finger>(f)));
         Vec3 n = tip.q * Vec3(0, -1, 0); Vec3 d = pp.p - tip.p; d -= d.dot(ax) * ax; d.normalize();
         std::printf("      pad%d normal(%.2f %.2f %.2f) toward-axis dot %.2f\n", f, n.x(), n.y(), n.z(), n.dot(d));
       }

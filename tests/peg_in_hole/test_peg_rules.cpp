@@ -266,7 +266,7 @@ TEST(PegConditions, WithoutHapticsTheDevicesGetZeroWhileContactsStay) {
       const HandCommand cmd = user.act(perceive(*w));
       w->submit_hand(cmd.T_world_wrist, cmd.angles);
       w->step();
-      max_contact = std::max(max_contact, grasp_force_n(w->snapshot().object_normal_n));
+      max_contact = std::max(max_contact, grasp_force_n(w->snapshot().hands[0].object_normal_n));
       if (touched_at < 0 && max_contact > 0.2) touched_at = i;
       for (std::size_t ch = 0; ch < w->snapshot().channel_count; ++ch) {
         max_commanded = std::max(max_commanded, w->snapshot().channels[ch].commanded.in_tip_frame().norm());
@@ -359,8 +359,8 @@ TEST(SimulatedUser, WithAaBothFingersCarryThePegWhenTheLiftBegins) {
       (*w)->submit_hand(cmd.T_world_wrist, cmd.angles);
       (*w)->step();
       if (user.phase_name() == "lift") {
-        index_n += (*w)->snapshot().contact[1].normal_n / 500.0;
-        middle_n += (*w)->snapshot().contact[2].normal_n / 500.0;
+        index_n += (*w)->snapshot().hands[0].contact[1].normal_n / 500.0;
+        middle_n += (*w)->snapshot().hands[0].contact[2].normal_n / 500.0;
         ++lift_ticks;
       }
     }

@@ -153,8 +153,8 @@ int run_sim(const SimArgs& a) {
     servo.tick(now);
     const ServoSnapshot* snap = servo.latest();
     constexpr auto kIndex = static_cast<std::size_t>(Finger::index);
-    const FingertipForce c = snap->contact[kIndex];
-    const FingertipForce pad = snap->on_pad[kIndex];
+    const FingertipForce c = snap->hands[0].contact[kIndex];
+    const FingertipForce pad = snap->hands[0].on_pad[kIndex];
     const double contact_force = c.in_tip_frame().norm();
     const auto& ch = snap->channels[0];
     const double commanded_force = ch.commanded.in_tip_frame().norm();
@@ -163,7 +163,7 @@ int run_sim(const SimArgs& a) {
     const double tracked_below = scene->depth(tracked.joint(HandJoint::index_tip).p, r);
     const double proxy_below = servo.simulation().fingertip(Finger::index).max_penetration_m;
     peak.contact_force = std::max(peak.contact_force, contact_force);
-    peak.contact_normal_sum = std::max(peak.contact_normal_sum, snap->contact_normal_n[kIndex]);
+    peak.contact_normal_sum = std::max(peak.contact_normal_sum, snap->hands[0].contact_normal_n[kIndex]);
     peak.pad_normal = std::max(peak.pad_normal, pad.normal_n);
     peak.pad_shear = std::max(peak.pad_shear, pad.shear_magnitude_n());
     peak.commanded_force = std::max(peak.commanded_force, commanded_force);
@@ -182,7 +182,7 @@ int run_sim(const SimArgs& a) {
       proxy_depth.x.push_back(t), proxy_depth.y.push_back(proxy_below * 1e3);
     }
     if (csv) {
-      csv << t << ',' << contact_force << ',' << snap->contact_normal_n[kIndex] << ',' << c.normal_n << ','
+      csv << t << ',' << contact_force << ',' << snap->hands[0].contact_normal_n[kIndex] << ',' << c.normal_n << ','
           << c.shear_x_n << ',' << c.shear_z_n << ',' << pad.normal_n << ',' << pad.shear_x_n << ',' << pad.shear_z_n
           << ',' << ch.commanded.normal_n << ',' << ch.commanded.shear_x_n << ',' << ch.commanded.shear_z_n << ','
           << ch.measured.normal_n << ',' << tracked_below << ',' << proxy_below << '\n';

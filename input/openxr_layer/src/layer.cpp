@@ -33,7 +33,10 @@
 #include "proprio/core/xr_interop.hpp"
 #include "proprio/hand_sources/hand_sources.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
+#include "proprio/hand_sources/plugin_loader.hpp"
+#include "proprio/openxr/XR_PROPRIO_fingertip_haptics.h"
 #include "proprio/openxr/XR_PROPRIO_hand_tracking_latency.h"
+#include "proprio/openxr_layer/fingertip_haptics_service.hpp"
 #include "proprio/openxr_layer/loader_interfaces.hpp"
 
 namespace proprio::openxr_layer {
@@ -70,6 +73,9 @@ struct Downstream {
   PFN_xrCreateHandTrackerEXT create_hand_tracker = nullptr;
   PFN_xrDestroyHandTrackerEXT destroy_hand_tracker = nullptr;
   PFN_xrLocateHandJointsEXT locate_hand_joints = nullptr;
+  // Only resolved when [haptics] is configured.
+  PFN_xrApplyHapticFeedback apply_haptic_feedback = nullptr;
+  PFN_xrStopHapticFeedback stop_haptic_feedback = nullptr;
 };
 
 // The head pose for a source's head-mounted camera, from the app's runtime.
@@ -105,6 +111,7 @@ struct Instance {
   bool motion_range = false;
   bool data_source = false;
   bool latency = false;   // XR_PROPRIO_hand_tracking_latency
+  bool fingertip = false;  // XR_PROPRIO_fingertip_haptics
   bool serving = false;  // Proprio implements hand tracking for this instance
   bool app_vive_tracker = false;    // the app itself enabled XR_HTCX_vive_tracker_interaction
   bool vive_tracker = false;        // enabled downstream (by the app or for a tracker wrist)
@@ -125,7 +132,14 @@ struct Instance {
   std::vector<std::pair<XrPath, std::vector<XrActionSuggestedBinding>>> our_bindings;
   std::vector<XrPath> app_suggested;  // profiles the app suggested for (guarded by the registry lock)
 
+  std::array<XrPath, 2> haptic_hand_paths{};  // /user/hand/{left,right}, for xrApplyHapticFeedback
+
   bool any_hand() const { return hands[0].source || hands[1].source; }
+  // Sessions get the fingertip devices: for the extension, or for mapping
+  // the app's vibrations.
+  bool haptics_wanted() const {
+    return config.haptics.enabled && (fingertip || config.haptics.vibration_gain > 0.0);
+  }
   bool wants_actions() const { return action_set != XR_NULL_HANDLE; }
 };
 
@@ -141,6 +155,10 @@ struct Session {
   std::atomic<std::uint32_t> frames{0};
   std::atomic<bool> app_attached{false};
   std::atomic<bool> attached_alone{false};
+  // The fingertip devices ([haptics]), output on only while FOCUSED, and the
+  // app's XrFingertipHapticsPROPRIO (one per session).
+  std::unique_ptr<FingertipHapticsService> haptics;
+  XrFingertipHapticsPROPRIO haptics_handle = XR_NULL_HANDLE;
 };
 constexpr std::uint32_t kAttachAloneAfterFrames = 90;
 
@@ -237,18 +255,23 @@ XrReferenceSpaceType to_xr(ReferenceSpace s) {
   return XR_REFERENCE_SPACE_TYPE_LOCAL;
 }
 
-// Loads the layer config and starts its sources. Failures are logged and
-// leave the instance without sources: the app then sees no hand tracking.
-void start_sources(Instance& inst) {
+// Loads the layer config. A failure is logged and leaves the instance
+// without sources or haptics: the app then sees no hand tracking.
+bool load_config(Instance& inst) {
   const auto path = default_layer_config_path();
   auto cfg = load_layer_config(path);
   if (!cfg) {
     logger().error("Proprio layer: {}. Proprio serves no hands (a runtime's own hand tracking, "
                    "if any, passes through). Write a config with 'proprio layer init-config'.",
                    cfg.error().message);
-    return;
+    return false;
   }
   inst.config = std::move(*cfg);
+  return true;
+}
+
+// Starts the configured sources.
+void start_sources(Instance& inst) {
   for (std::size_t i = 0; i < inst.config.sources.size(); ++i) {
     SourceConfig& sc = inst.config.sources[i];
     if (!sc.wrist_calibration.empty()) {
@@ -312,16 +335,36 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_system_properties(XrInstance instance, 
     Instance* inst = find_instance(instance);
     if (!inst) return XR_ERROR_HANDLE_INVALID;
     if (!properties) return XR_ERROR_VALIDATION_FAILURE;
-    // The runtime did not enable hand tracking for us, so take our struct out
-    // of the chain while it fills the rest, then answer it ourselves.
-    XrBaseOutStructure* before = reinterpret_cast<XrBaseOutStructure*>(properties);
-    while (before->next && before->next->type != XR_TYPE_SYSTEM_HAND_TRACKING_PROPERTIES_EXT) before = before->next;
-    auto* ours = reinterpret_cast<XrSystemHandTrackingPropertiesEXT*>(before->next);
-    if (ours) before->next = reinterpret_cast<XrBaseOutStructure*>(ours->next);
+    // The runtime did not enable hand tracking for us and knows nothing of
+    // fingertip haptics, so take our structs out of the chain while it fills
+    // the rest (restoring the app's chain as it was), then answer them.
+    struct Taken {
+      XrBaseOutStructure* before = nullptr;
+      XrBaseOutStructure* ours = nullptr;
+    };
+    const auto take = [&](XrStructureType type) {
+      Taken t;
+      t.before = reinterpret_cast<XrBaseOutStructure*>(properties);
+      while (t.before->next && t.before->next->type != type) t.before = t.before->next;
+      t.ours = t.before->next;
+      if (t.ours) t.before->next = t.ours->next;
+      return t;
+    };
+    const Taken hands = inst->serving ? take(XR_TYPE_SYSTEM_HAND_TRACKING_PROPERTIES_EXT) : Taken{};
+    const Taken fingertips = inst->fingertip ? take(XR_TYPE_SYSTEM_FINGERTIP_HAPTICS_PROPERTIES_PROPRIO) : Taken{};
     const XrResult r = inst->next.get_system_properties(instance, system, properties);
-    if (ours) {
-      before->next = reinterpret_cast<XrBaseOutStructure*>(ours);
-      if (XR_SUCCEEDED(r)) ours->supportsHandTracking = inst->any_hand() ? XR_TRUE : XR_FALSE;
+    for (const Taken* t : {&fingertips, &hands}) {  // put back in reverse order
+      if (t->ours) t->before->next = t->ours;
+    }
+    if (XR_SUCCEEDED(r) && hands.ours) {
+      reinterpret_cast<XrSystemHandTrackingPropertiesEXT*>(hands.ours)->supportsHandTracking =
+          inst->any_hand() ? XR_TRUE : XR_FALSE;
+    }
+    if (XR_SUCCEEDED(r) && fingertips.ours) {
+      auto* f = reinterpret_cast<XrSystemFingertipHapticsPropertiesPROPRIO*>(fingertips.ours);
+      // Configured is what an app can know before a session starts the devices.
+      f->supportsFingertipHaptics = inst->config.haptics.enabled ? XR_TRUE : XR_FALSE;
+      f->supportsContactSimulation = inst->config.haptics.enabled && inst->config.haptics.contact ? XR_TRUE : XR_FALSE;
     }
     return r;
   });
@@ -385,6 +428,29 @@ void release_session(Session& s) {
   for (XrSpace& space : s.wrist_spaces) drop(space);
 }
 
+// The session's fingertip devices, through the haptics plugin. A failure is
+// logged: the app then sees supportsFingertipHaptics = false.
+void start_haptics(const Instance& inst, Session& s) {
+  auto plugin = hand_sources::load_plugin("haptics");
+  if (plugin && (*plugin)->start_haptics == nullptr) {
+    plugin = make_error(Errc::unsupported, "the haptics plugin has no start_haptics; reinstall Proprio");
+  }
+  if (!plugin) {
+    logger().error("Proprio layer: no fingertip haptics: {}", plugin.error().message);
+    return;
+  }
+  auto service = (*plugin)->start_haptics(inst.config.haptics);
+  if (!service) {
+    logger().error("Proprio layer: no fingertip haptics: {}: {}", inst.config.origin, service.error().message);
+    return;
+  }
+  s.haptics = std::move(*service);
+  s.haptics->set_output(false);  // until the session is FOCUSED
+  logger().info("Proprio layer: fingertip haptics: {}", s.haptics->describe());
+}
+
+void erase_haptics_of(const Instance* inst, XrSession session);
+
 XRAPI_ATTR XrResult XRAPI_CALL layer_create_session(XrInstance instance, const XrSessionCreateInfo* info,
                                                     XrSession* session) {
   return guarded("xrCreateSession", [&] {
@@ -393,6 +459,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_session(XrInstance instance, const X
     const XrResult r = inst->next.create_session(instance, info, session);
     if (XR_SUCCEEDED(r)) {
       auto state = make_session(*inst, *session);
+      if (inst->haptics_wanted()) start_haptics(*inst, *state);
       std::unique_lock lock(registry().mutex);
       registry().sessions[*session] = std::move(state);
     }
@@ -431,7 +498,9 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_session(XrSession session) {
     if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
     Instance* inst = it->second->instance;
     erase_trackers_if([&](const Tracker& t) { return t.session == session; });
+    erase_haptics_of(nullptr, session);
     release_session(*it->second);
+    it->second->haptics.reset();  // zero on every device, before the session goes
     r.sessions.erase(it);
     return inst->next.destroy_session(session);
   });
@@ -446,6 +515,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_instance(XrInstance instance) {
       auto it = r.instances.find(instance);
       if (it == r.instances.end()) return XR_ERROR_HANDLE_INVALID;
       erase_trackers_if([&](const Tracker& t) { return t.instance == it->second.get(); });
+      erase_haptics_of(it->second.get(), XR_NULL_HANDLE);
       // The runtime destroys the sessions' children with the instance.
       for (auto s = r.sessions.begin(); s != r.sessions.end();) {
         s = s->second->instance == it->second.get() ? r.sessions.erase(s) : std::next(s);
@@ -747,14 +817,27 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_begin_frame(XrSession session, const XrFram
   });
 }
 
-// Tracker connection events go to the app only if it enabled the extension itself.
+// Tracker connection events go to the app only if it enabled the extension
+// itself. Session state changes switch the fingertip devices: they render
+// only while the session is FOCUSED (a hidden or backgrounded app, a lost
+// session or one on its way out presses nothing).
 XRAPI_ATTR XrResult XRAPI_CALL layer_poll_event(XrInstance instance, XrEventDataBuffer* event) {
   return guarded("xrPollEvent", [&] {
     Instance* inst = find_instance(instance);
     if (!inst) return XR_ERROR_HANDLE_INVALID;
+    const bool swallow_trackers = inst->vive_tracker && !inst->app_vive_tracker;
     for (;;) {
       const XrResult r = inst->next.poll_event(instance, event);
-      if (r != XR_SUCCESS || event->type != XR_TYPE_EVENT_DATA_VIVE_TRACKER_CONNECTED_HTCX) return r;
+      if (r != XR_SUCCESS) return r;
+      if (event->type == XR_TYPE_EVENT_DATA_SESSION_STATE_CHANGED) {
+        const auto* e = reinterpret_cast<const XrEventDataSessionStateChanged*>(event);
+        std::shared_lock lock(registry().mutex);
+        auto it = registry().sessions.find(e->session);
+        if (it != registry().sessions.end() && it->second->haptics) {
+          it->second->haptics->set_output(e->state == XR_SESSION_STATE_FOCUSED);
+        }
+      }
+      if (!swallow_trackers || event->type != XR_TYPE_EVENT_DATA_VIVE_TRACKER_CONNECTED_HTCX) return r;
       event->type = XR_TYPE_EVENT_DATA_BUFFER;  // swallowed; the next one, if any
     }
   });
@@ -1139,12 +1222,533 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_locate_hand_joints(XrHandTrackerEXT tracker
   });
 }
 
+// ---- XR_PROPRIO_fingertip_haptics -------------------------------------------
+//
+// The devices live in the session's FingertipHapticsService (the `haptics`
+// plugin, loaded only when a [haptics] table is configured). An app's
+// XrFingertipHapticsPROPRIO binds them to its spaces: the hand sources'
+// origins, located in the app's world space whenever the app hands the layer
+// an XrTime, carry the tracked hands into the contact simulation's world.
+
+// XrTime -> CLOCK_MONOTONIC, the time base of every Proprio sample.
+TimeNs to_monotonic(const Instance& inst, XrTime time) {
+  if (inst.next.convert_time_to_timespec) {
+    timespec ts{};
+    if (XR_SUCCEEDED(inst.next.convert_time_to_timespec(inst.handle, time, &ts))) {
+      return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+    }
+  }
+  return time;
+}
+
+// `space` in `base` at `time`, when both position and orientation are valid.
+bool locate_pose(const Instance& inst, XrSpace space, XrSpace base, XrTime time, Pose& T_base_space,
+                 XrResult* error = nullptr) {
+  auto loc = xr_struct<XrSpaceLocation>(XR_TYPE_SPACE_LOCATION);
+  const XrResult r = inst.next.locate_space(space, base, time, &loc);
+  if (error) *error = r;
+  if (XR_FAILED(r) || (loc.locationFlags & kBothValid) != kBothValid) return false;
+  T_base_space = from_xr(loc.pose);
+  return true;
+}
+
+HandPose moved(const HandPose& p, const Pose& T_new_old) {
+  HandPose out = p;
+  for (std::size_t i = 0; i < kHandJointCount; ++i) {
+    out.T_world_joint[i] = T_new_old * p.T_world_joint[i];
+    out.linear_velocity_in_world[i] = T_new_old.q * p.linear_velocity_in_world[i];
+    out.angular_velocity_in_world[i] = T_new_old.q * p.angular_velocity_in_world[i];
+  }
+  return out;
+}
+
+struct HapticsHandle final : TrackedHandFeed {
+  Instance* instance = nullptr;
+  Session* session = nullptr;
+  FingertipHapticsService* service = nullptr;
+  bool contact = false;
+  XrSpace world_space = XR_NULL_HANDLE;
+  std::array<XrSpace, 2> source_space{};  // per hand: its source's origin (our own reference spaces)
+  std::vector<XrHapticColliderPROPRIO> colliders;  // registry lock
+
+  // Where each hand's source origin is in world_space, as last located.
+  std::mutex frame_mutex;
+  std::array<Pose, 2> T_world_source{};
+  std::array<bool, 2> located{};
+
+  // The tracked hand in the world: for the service's feeder thread.
+  bool tracked_hand(Handedness hand, TimeNs t_ns, HandPose& out) noexcept override {
+    const auto h = static_cast<std::size_t>(hand);
+    HandSource* source = instance->hands[h].source;
+    if (source == nullptr) return false;
+    Pose T;
+    {
+      std::lock_guard lock(frame_mutex);
+      if (!located[h]) return false;
+      T = T_world_source[h];
+    }
+    HandPose pose;
+    if (!is_usable(source->lookup(hand, t_ns, pose)) || !pose.active) return false;
+    out = moved(pose, T);
+    return true;
+  }
+
+  // Called with each XrTime the app gives (app threads).
+  void relocate(XrTime time) {
+    if (!contact || time <= 0) return;
+    for (std::size_t h = 0; h < 2; ++h) {
+      Pose T;
+      if (source_space[h] == XR_NULL_HANDLE || !locate_pose(*instance, source_space[h], world_space, time, T)) continue;
+      std::lock_guard lock(frame_mutex);
+      T_world_source[h] = T;
+      located[h] = true;
+    }
+  }
+};
+
+struct ColliderHandle {
+  HapticsHandle* parent = nullptr;
+  int id = -1;
+};
+
+// Guarded by the registry's lock, like the other handles.
+std::unordered_map<XrFingertipHapticsPROPRIO, std::unique_ptr<HapticsHandle>>& haptics_handles() {
+  static std::unordered_map<XrFingertipHapticsPROPRIO, std::unique_ptr<HapticsHandle>> m;
+  return m;
+}
+std::unordered_map<XrHapticColliderPROPRIO, std::unique_ptr<ColliderHandle>>& collider_handles() {
+  static std::unordered_map<XrHapticColliderPROPRIO, std::unique_ptr<ColliderHandle>> m;
+  return m;
+}
+
+bool hand_of(XrHandEXT hand, Handedness& out) {
+  if (hand != XR_HAND_LEFT_EXT && hand != XR_HAND_RIGHT_EXT) return false;
+  out = hand == XR_HAND_LEFT_EXT ? Handedness::left : Handedness::right;
+  return true;
+}
+
+bool finite_pose(const XrPosef& p) {
+  const float v[] = {p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y, p.orientation.z,
+                     p.orientation.w};
+  for (float x : v) {
+    if (!std::isfinite(x)) return false;
+  }
+  const double n2 = double(p.orientation.x) * p.orientation.x + double(p.orientation.y) * p.orientation.y +
+                    double(p.orientation.z) * p.orientation.z + double(p.orientation.w) * p.orientation.w;
+  return std::abs(n2 - 1.0) < 1e-2;  // OpenXR: a pose's orientation must be a unit quaternion
+}
+
+// Releases a haptics handle's colliders and spaces and stops its simulation.
+// Caller holds the registry exclusively.
+void release_haptics(HapticsHandle& hh) {
+  for (XrHapticColliderPROPRIO c : hh.colliders) collider_handles().erase(c);
+  hh.colliders.clear();
+  hh.service->stop_contact();
+  hh.service->clear_app_forces();
+  for (XrSpace& s : hh.source_space) {
+    if (s != XR_NULL_HANDLE) hh.instance->next.destroy_space(s);
+    s = XR_NULL_HANDLE;
+  }
+  hh.session->haptics_handle = XR_NULL_HANDLE;
+}
+
+// Child handles go with their parent. Caller holds the registry exclusively.
+void erase_haptics_of(const Instance* inst, XrSession session) {
+  auto& m = haptics_handles();
+  for (auto it = m.begin(); it != m.end();) {
+    if (it->second->instance == inst || (session != XR_NULL_HANDLE && it->second->session->handle == session)) {
+      release_haptics(*it->second);
+      it = m.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_create_fingertip_haptics(XrSession session,
+                                                              const XrFingertipHapticsCreateInfoPROPRIO* info,
+                                                              XrFingertipHapticsPROPRIO* out) {
+  return guarded("xrCreateFingertipHapticsPROPRIO", [&] {
+    auto& r = registry();
+    std::unique_lock lock(r.mutex);
+    auto it = r.sessions.find(session);
+    if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
+    Session& s = *it->second;
+    Instance& inst = *s.instance;
+    if (!info || info->type != XR_TYPE_FINGERTIP_HAPTICS_CREATE_INFO_PROPRIO || !out) return XR_ERROR_VALIDATION_FAILURE;
+    if (info->contactSimulation != XR_FALSE && info->contactSimulation != XR_TRUE) return XR_ERROR_VALIDATION_FAILURE;
+    const bool contact = info->contactSimulation == XR_TRUE;
+    if (contact && info->worldSpace == XR_NULL_HANDLE) return XR_ERROR_HANDLE_INVALID;
+    if (!s.haptics) return XR_ERROR_FEATURE_UNSUPPORTED;  // supportsFingertipHaptics was false
+    if (contact && !s.haptics->contact_allowed()) return XR_ERROR_FEATURE_UNSUPPORTED;
+    if (s.haptics_handle != XR_NULL_HANDLE) return XR_ERROR_LIMIT_REACHED;  // one per session: the devices are one set
+
+    auto hh = std::make_unique<HapticsHandle>();
+    hh->instance = &inst;
+    hh->session = &s;
+    hh->service = s.haptics.get();
+    hh->contact = contact;
+    hh->world_space = contact ? info->worldSpace : XR_NULL_HANDLE;
+    for (std::size_t h = 0; h < 2; ++h) {
+      const HandBinding& b = inst.hands[h];
+      if (!b.source) continue;
+      if (inst.wrist[h].kind != WristSource::source) {
+        // The runtime's wrist is only known inside xrLocateHandJointsEXT; forces
+        // in a base space and the simulation need the source's own frame.
+        logger().warn("Proprio layer: fingertip haptics: the {} hand's wrist comes from the runtime ({}); its "
+                      "forces work only in fingertip frames and it has no proxy", to_string(static_cast<Handedness>(h)),
+                      to_string(inst.wrist[h].kind));
+        continue;
+      }
+      hh->source_space[h] = make_reference_space(inst, session, to_xr(b.config->space), b.config->T_space_source,
+                                                 "fingertip haptics source origin");
+    }
+    if (contact) {
+      // Where the sources are now, so that the proxies can take the tracked
+      // hands' sizes at once (the app's own calls keep it current).
+      const TimeNs now = MonotonicClock::instance().now_ns();
+      XrTime xr_now = now;
+      if (inst.next.convert_timespec_to_time) {
+        timespec ts{static_cast<time_t>(now / kNsPerSecond), static_cast<long>(now % kNsPerSecond)};
+        if (XR_FAILED(inst.next.convert_timespec_to_time(inst.handle, &ts, &xr_now))) xr_now = now;
+      }
+      hh->relocate(xr_now);
+      if (auto st = s.haptics->start_contact(hh.get()); !st) {
+        logger().error("Proprio layer: fingertip haptics: {}", st.error().message);
+        for (XrSpace sp : hh->source_space) {
+          if (sp != XR_NULL_HANDLE) inst.next.destroy_space(sp);
+        }
+        return XR_ERROR_RUNTIME_FAILURE;
+      }
+    }
+    const auto handle = reinterpret_cast<XrFingertipHapticsPROPRIO>(hh.get());
+    s.haptics_handle = handle;
+    haptics_handles()[handle] = std::move(hh);
+    *out = handle;
+    return XR_SUCCESS;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_fingertip_haptics(XrFingertipHapticsPROPRIO haptics) {
+  return guarded("xrDestroyFingertipHapticsPROPRIO", [&] {
+    std::unique_lock lock(registry().mutex);
+    auto it = haptics_handles().find(haptics);
+    if (it == haptics_handles().end()) return XR_ERROR_HANDLE_INVALID;
+    release_haptics(*it->second);
+    haptics_handles().erase(it);
+    return XR_SUCCESS;
+  });
+}
+
+// The handle under the shared lock (held by the caller).
+HapticsHandle* find_haptics_locked(XrFingertipHapticsPROPRIO h) {
+  auto it = haptics_handles().find(h);
+  return it == haptics_handles().end() ? nullptr : it->second.get();
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_get_fingertip_haptics_properties(XrFingertipHapticsPROPRIO haptics, XrHandEXT hand,
+                                                                      XrFingertipHapticsPropertiesPROPRIO* out) {
+  return guarded("xrGetFingertipHapticsPropertiesPROPRIO", [&] {
+    std::shared_lock lock(registry().mutex);
+    HapticsHandle* hh = find_haptics_locked(haptics);
+    if (!hh) return XR_ERROR_HANDLE_INVALID;
+    Handedness side;
+    if (!hand_of(hand, side) || !out || out->type != XR_TYPE_FINGERTIP_HAPTICS_PROPERTIES_PROPRIO) {
+      return XR_ERROR_VALIDATION_FAILURE;
+    }
+    FingertipHapticsReport report;
+    const bool have_report = hh->service->report(side, report);
+    const HandCapabilities& caps = hh->service->capabilities()[static_cast<std::size_t>(side)];
+    for (std::size_t f = 0; f < kFingerCount; ++f) {
+      const FingertipCapability& c = caps[f];
+      XrFingertipDevicePropertiesPROPRIO& o = out->fingers[f];
+      o = {};
+      o.present = c.present ? XR_TRUE : XR_FALSE;
+      o.connected = c.present && (have_report ? report.fingers[f].connected : c.connected) ? XR_TRUE : XR_FALSE;
+      o.forceDofCount = static_cast<uint32_t>(c.force_dofs);
+      o.maxNormalForce = static_cast<float>(c.max_normal_n);
+      o.maxShearForce = static_cast<float>(c.max_shear_n);
+      o.maxForceRate = static_cast<float>(c.max_rate_n_per_s);
+      o.frictionCoefficient = static_cast<float>(c.friction_coefficient);
+      o.watchdogPeriod = c.watchdog_ns;
+      std::snprintf(o.deviceName, sizeof o.deviceName, "%s", c.device.c_str());
+    }
+    return XR_SUCCESS;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_apply_fingertip_forces(XrFingertipHapticsPROPRIO haptics,
+                                                            const XrFingertipForcesPROPRIO* forces) {
+  return guarded("xrApplyFingertipForcesPROPRIO", [&] {
+    std::shared_lock lock(registry().mutex);
+    HapticsHandle* hh = find_haptics_locked(haptics);
+    if (!hh) return XR_ERROR_HANDLE_INVALID;
+    Handedness side;
+    if (!forces || forces->type != XR_TYPE_FINGERTIP_FORCES_PROPRIO || !hand_of(forces->hand, side)) {
+      return XR_ERROR_VALIDATION_FAILURE;
+    }
+    const TimeNs now = MonotonicClock::instance().now_ns();
+    std::array<Vec3, kFingerCount> f_in_tip;
+    for (std::size_t f = 0; f < kFingerCount; ++f) f_in_tip[f] = from_xr(forces->forces[f]);
+    if (forces->baseSpace != XR_NULL_HANDLE) {
+      if (forces->time <= 0) return XR_ERROR_TIME_INVALID;
+      // Into each fingertip's frame: the tracked hand at that time, its
+      // source origin located in the base space.
+      const auto h = static_cast<std::size_t>(side);
+      const Instance& inst = *hh->instance;
+      HandPose pose;
+      Pose T_base_source;
+      XrResult located = XR_SUCCESS;
+      const bool have_frame = hh->source_space[h] != XR_NULL_HANDLE &&
+                              locate_pose(inst, hh->source_space[h], forces->baseSpace, forces->time, T_base_source, &located);
+      if (located == XR_ERROR_HANDLE_INVALID) return XR_ERROR_HANDLE_INVALID;
+      if (located == XR_ERROR_TIME_INVALID) return XR_ERROR_TIME_INVALID;
+      const bool have_hand = have_frame && inst.hands[h].source &&
+                             is_usable(inst.hands[h].source->lookup(side, to_monotonic(inst, forces->time), pose)) &&
+                             pose.active;
+      for (std::size_t f = 0; f < kFingerCount; ++f) {
+        if (!have_hand) {
+          // No hand to put the force on: nothing is rendered (non-finite input still counts below).
+          f_in_tip[f] = f_in_tip[f].allFinite() ? Vec3::Zero() : f_in_tip[f];
+          continue;
+        }
+        const Quat q_base_tip = T_base_source.q * pose.joint(tip_of(static_cast<Finger>(f))).q;
+        f_in_tip[f] = q_base_tip.conjugate() * f_in_tip[f];
+      }
+      hh->relocate(forces->time);
+    }
+    return hh->service->apply_forces(side, f_in_tip, now) ? XR_SUCCESS : XR_ERROR_VALIDATION_FAILURE;
+  });
+}
+
+// A pose info in the handle's world space (the app's space at its time).
+XrResult collider_pose_in_world(const HapticsHandle& hh, const XrHapticColliderPoseInfoPROPRIO& p, Pose& T_world) {
+  if (p.type != XR_TYPE_HAPTIC_COLLIDER_POSE_INFO_PROPRIO) return XR_ERROR_VALIDATION_FAILURE;
+  if (p.space == XR_NULL_HANDLE) return XR_ERROR_HANDLE_INVALID;
+  if (p.time <= 0) return XR_ERROR_TIME_INVALID;
+  if (!finite_pose(p.pose)) return XR_ERROR_POSE_INVALID;
+  Pose T_world_space;
+  XrResult r = XR_SUCCESS;
+  if (!locate_pose(*hh.instance, p.space, hh.world_space, p.time, T_world_space, &r)) {
+    return XR_FAILED(r) ? r : XR_ERROR_POSE_INVALID;  // valid call, but the space is not located now
+  }
+  T_world = T_world_space * from_xr(p.pose);
+  return XR_SUCCESS;
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_create_haptic_collider(XrFingertipHapticsPROPRIO haptics,
+                                                            const XrHapticColliderCreateInfoPROPRIO* info,
+                                                            XrHapticColliderPROPRIO* out) {
+  return guarded("xrCreateHapticColliderPROPRIO", [&] {
+    std::unique_lock lock(registry().mutex);
+    HapticsHandle* hh = find_haptics_locked(haptics);
+    if (!hh) return XR_ERROR_HANDLE_INVALID;
+    if (!info || info->type != XR_TYPE_HAPTIC_COLLIDER_CREATE_INFO_PROPRIO || !out) return XR_ERROR_VALIDATION_FAILURE;
+    if (!hh->contact) return XR_ERROR_FEATURE_UNSUPPORTED;  // created without the contact simulation
+    ColliderSpec spec;
+    switch (info->shape) {
+      case XR_HAPTIC_COLLIDER_SHAPE_SPHERE_PROPRIO: spec.kind = ColliderKind::sphere; break;
+      case XR_HAPTIC_COLLIDER_SHAPE_BOX_PROPRIO: spec.kind = ColliderKind::box; break;
+      case XR_HAPTIC_COLLIDER_SHAPE_CAPSULE_PROPRIO: spec.kind = ColliderKind::capsule; break;
+      case XR_HAPTIC_COLLIDER_SHAPE_CYLINDER_PROPRIO: spec.kind = ColliderKind::cylinder; break;
+      default: return XR_ERROR_VALIDATION_FAILURE;
+    }
+    spec.radius_m = info->radius;
+    spec.half_length_m = info->halfLength;
+    spec.half_extents_m = from_xr(info->halfExtents);
+    spec.friction = info->friction;
+    Pose T_world;
+    if (const XrResult pr = collider_pose_in_world(*hh, info->poseInfo, T_world); XR_FAILED(pr)) return pr;
+    hh->relocate(info->poseInfo.time);
+    const int id = hh->service->add_collider(spec, T_world);
+    if (id == FingertipHapticsService::kCollidersFull) return XR_ERROR_LIMIT_REACHED;
+    if (id < 0) return XR_ERROR_VALIDATION_FAILURE;  // sizes or friction out of range
+    auto c = std::make_unique<ColliderHandle>();
+    c->parent = hh;
+    c->id = id;
+    const auto handle = reinterpret_cast<XrHapticColliderPROPRIO>(c.get());
+    collider_handles()[handle] = std::move(c);
+    hh->colliders.push_back(handle);
+    *out = handle;
+    return XR_SUCCESS;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_set_haptic_collider_pose(XrHapticColliderPROPRIO collider,
+                                                              const XrHapticColliderPoseInfoPROPRIO* info) {
+  return guarded("xrSetHapticColliderPosePROPRIO", [&] {
+    std::shared_lock lock(registry().mutex);
+    auto it = collider_handles().find(collider);
+    if (it == collider_handles().end()) return XR_ERROR_HANDLE_INVALID;
+    if (!info) return XR_ERROR_VALIDATION_FAILURE;
+    HapticsHandle& hh = *it->second->parent;
+    Pose T_world;
+    if (const XrResult pr = collider_pose_in_world(hh, *info, T_world); XR_FAILED(pr)) return pr;
+    hh.relocate(info->time);
+    hh.service->move_collider(it->second->id, T_world);
+    return XR_SUCCESS;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_destroy_haptic_collider(XrHapticColliderPROPRIO collider) {
+  return guarded("xrDestroyHapticColliderPROPRIO", [&] {
+    std::unique_lock lock(registry().mutex);
+    auto it = collider_handles().find(collider);
+    if (it == collider_handles().end()) return XR_ERROR_HANDLE_INVALID;
+    HapticsHandle& hh = *it->second->parent;
+    hh.service->remove_collider(it->second->id);
+    std::erase(hh.colliders, collider);
+    collider_handles().erase(it);
+    return XR_SUCCESS;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_locate_proxy_hand_joints(XrFingertipHapticsPROPRIO haptics, XrHandEXT hand,
+                                                              const XrHandJointsLocateInfoEXT* info,
+                                                              XrHandJointLocationsEXT* locations) {
+  return guarded("xrLocateProxyHandJointsPROPRIO", [&] {
+    std::shared_lock lock(registry().mutex);
+    HapticsHandle* hh = find_haptics_locked(haptics);
+    if (!hh) return XR_ERROR_HANDLE_INVALID;
+    Handedness side;
+    if (!hand_of(hand, side)) return XR_ERROR_VALIDATION_FAILURE;
+    if (!info || info->type != XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT) return XR_ERROR_VALIDATION_FAILURE;
+    if (!locations || locations->type != XR_TYPE_HAND_JOINT_LOCATIONS_EXT) return XR_ERROR_VALIDATION_FAILURE;
+    if (locations->jointCount != kHandJointCount || !locations->jointLocations) return XR_ERROR_VALIDATION_FAILURE;
+    auto* velocities = find_in_chain<XrHandJointVelocitiesEXT>(locations->next, XR_TYPE_HAND_JOINT_VELOCITIES_EXT);
+    if (velocities && (velocities->jointCount != kHandJointCount || !velocities->jointVelocities)) {
+      return XR_ERROR_VALIDATION_FAILURE;
+    }
+    if (info->baseSpace == XR_NULL_HANDLE) return XR_ERROR_HANDLE_INVALID;
+    if (info->time <= 0) return XR_ERROR_TIME_INVALID;
+    if (!hh->contact) return XR_ERROR_FEATURE_UNSUPPORTED;
+    hh->relocate(info->time);
+    HandPose proxy;
+    Pose T_base_world;
+    XrResult r = XR_SUCCESS;
+    const bool have_world = locate_pose(*hh->instance, hh->world_space, info->baseSpace, info->time, T_base_world, &r);
+    if (r == XR_ERROR_HANDLE_INVALID || r == XR_ERROR_TIME_INVALID) return r;
+    if (!have_world || !hh->service->proxy_hand(side, proxy)) {
+      write_inactive(locations, velocities, nullptr);
+      return XR_SUCCESS;
+    }
+    // The simulated proxy is where it is now: it has no history to look up
+    // at other times (the layer's 1 kHz simulation lags the tracked hand by
+    // the coupling's ~20 ms time constant, which is what makes it a proxy).
+    locations->isActive = XR_TRUE;
+    for (std::size_t i = 0; i < kHandJointCount; ++i) {
+      XrHandJointLocationEXT& o = locations->jointLocations[i];
+      o.pose = proprio::to_xr(T_base_world * proxy.T_world_joint[i]);
+      o.radius = static_cast<float>(std::max(proxy.radius_m[i], 1e-3));
+      o.locationFlags = kBothValid | kBothTracked;
+    }
+    if (velocities) {
+      for (uint32_t i = 0; i < velocities->jointCount; ++i) velocities->jointVelocities[i].velocityFlags = 0;
+    }
+    return XR_SUCCESS;
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_get_fingertip_haptics_state(XrFingertipHapticsPROPRIO haptics, XrHandEXT hand,
+                                                                 XrFingertipHapticsStatePROPRIO* state) {
+  return guarded("xrGetFingertipHapticsStatePROPRIO", [&] {
+    std::shared_lock lock(registry().mutex);
+    HapticsHandle* hh = find_haptics_locked(haptics);
+    if (!hh) return XR_ERROR_HANDLE_INVALID;
+    Handedness side;
+    if (!hand_of(hand, side) || !state || state->type != XR_TYPE_FINGERTIP_HAPTICS_STATE_PROPRIO) {
+      return XR_ERROR_VALIDATION_FAILURE;
+    }
+    FingertipHapticsReport report;
+    state->time = 0;
+    for (auto& f : state->fingers) f = {};
+    if (!hh->service->report(side, report)) return XR_SUCCESS;
+    const Instance& inst = *hh->instance;
+    XrTime t = report.time_ns;
+    if (inst.next.convert_timespec_to_time) {
+      timespec ts{static_cast<time_t>(report.time_ns / kNsPerSecond), static_cast<long>(report.time_ns % kNsPerSecond)};
+      if (XR_FAILED(inst.next.convert_timespec_to_time(inst.handle, &ts, &t))) t = report.time_ns;
+    }
+    state->time = t;
+    for (std::size_t f = 0; f < kFingerCount; ++f) {
+      const FingertipReport& in = report.fingers[f];
+      XrFingertipStatePROPRIO& o = state->fingers[f];
+      switch (in.gate) {
+        case FingertipGate::ramping: o.gateState = XR_FINGERTIP_GATE_STATE_RAMPING_PROPRIO; break;
+        case FingertipGate::active: o.gateState = XR_FINGERTIP_GATE_STATE_ACTIVE_PROPRIO; break;
+        case FingertipGate::faulted: o.gateState = XR_FINGERTIP_GATE_STATE_FAULTED_PROPRIO; break;
+        default: o.gateState = XR_FINGERTIP_GATE_STATE_OFF_PROPRIO;
+      }
+      o.connected = in.connected ? XR_TRUE : XR_FALSE;
+      o.commandedForce = proprio::to_xr(in.commanded_in_tip);
+      o.measuredForce = proprio::to_xr(in.measured_in_tip);
+      o.contactForce = proprio::to_xr(in.contact_in_tip);
+    }
+    return XR_SUCCESS;
+  });
+}
+
+// xrApplyHapticFeedback on a hand path (or on no path: both hands) presses
+// the fingertip devices of that hand; the call goes on to the runtime too,
+// so controllers still buzz.
+bool hands_of_haptic_action(const Instance& inst, const XrHapticActionInfo* info, std::array<bool, 2>& hands) {
+  if (!info || info->type != XR_TYPE_HAPTIC_ACTION_INFO) return false;
+  hands = {info->subactionPath == XR_NULL_PATH || info->subactionPath == inst.haptic_hand_paths[0],
+           info->subactionPath == XR_NULL_PATH || info->subactionPath == inst.haptic_hand_paths[1]};
+  return hands[0] || hands[1];
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_apply_haptic_feedback(XrSession session, const XrHapticActionInfo* info,
+                                                           const XrHapticBaseHeader* feedback) {
+  return guarded("xrApplyHapticFeedback", [&] {
+    PFN_xrApplyHapticFeedback next = nullptr;
+    {
+      std::shared_lock lock(registry().mutex);
+      auto it = registry().sessions.find(session);
+      if (it == registry().sessions.end()) return XR_ERROR_HANDLE_INVALID;
+      const Session& s = *it->second;
+      next = s.instance->next.apply_haptic_feedback;
+      std::array<bool, 2> hands{};
+      if (s.haptics && feedback && feedback->type == XR_TYPE_HAPTIC_VIBRATION &&
+          hands_of_haptic_action(*s.instance, info, hands)) {
+        const auto* v = reinterpret_cast<const XrHapticVibration*>(feedback);
+        const TimeNs now = MonotonicClock::instance().now_ns();
+        for (std::size_t h = 0; h < 2; ++h) {
+          if (hands[h]) s.haptics->vibrate(static_cast<Handedness>(h), v->amplitude, v->duration, now);
+        }
+      }
+    }
+    return next(session, info, feedback);
+  });
+}
+
+XRAPI_ATTR XrResult XRAPI_CALL layer_stop_haptic_feedback(XrSession session, const XrHapticActionInfo* info) {
+  return guarded("xrStopHapticFeedback", [&] {
+    PFN_xrStopHapticFeedback next = nullptr;
+    {
+      std::shared_lock lock(registry().mutex);
+      auto it = registry().sessions.find(session);
+      if (it == registry().sessions.end()) return XR_ERROR_HANDLE_INVALID;
+      const Session& s = *it->second;
+      next = s.instance->next.stop_haptic_feedback;
+      std::array<bool, 2> hands{};
+      if (s.haptics && hands_of_haptic_action(*s.instance, info, hands)) {
+        for (std::size_t h = 0; h < 2; ++h) {
+          if (hands[h]) s.haptics->stop_vibration(static_cast<Handedness>(h));
+        }
+      }
+    }
+    return next(session, info);
+  });
+}
+
 XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance, const char* name,
                                                             PFN_xrVoidFunction* function) {
   return guarded("xrGetInstanceProcAddr", [&] {
     if (!name || !function) return XR_ERROR_VALIDATION_FAILURE;
     PFN_xrGetInstanceProcAddr next = nullptr;
     bool hook_hands = false, hook_system = false, hook_actions = false, hook_events = false, latency = false;
+    bool fingertip = false, haptics = false, vibration = false;
     {
       std::shared_lock lock(registry().mutex);
       const Instance* inst = find_instance_locked(instance);
@@ -1158,6 +1762,9 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
       hook_actions = hook_system && inst->wants_actions();
       hook_events = hook_system && inst->vive_tracker && !inst->app_vive_tracker;
       latency = hook_system && inst->latency;
+      fingertip = inst->fingertip;
+      haptics = inst->haptics_wanted();
+      vibration = haptics && inst->next.apply_haptic_feedback && inst->next.stop_haptic_feedback;
     }
     const std::string_view n(name);
     auto ours = [&](auto fn) {
@@ -1167,10 +1774,40 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
     // Always ours, so our per-instance state lives exactly as long as the instance.
     if (n == "xrGetInstanceProcAddr") return ours(&layer_get_instance_proc_addr);
     if (n == "xrDestroyInstance") return ours(&layer_destroy_instance);
-    if (hook_system) {
+    if (hook_system || fingertip) {
       if (n == "xrGetSystemProperties") return ours(&layer_get_system_properties);
+    }
+    if (hook_system || haptics) {
       if (n == "xrCreateSession") return ours(&layer_create_session);
       if (n == "xrDestroySession") return ours(&layer_destroy_session);
+    }
+    if ((hook_events || haptics) && n == "xrPollEvent") return ours(&layer_poll_event);
+    if (vibration) {
+      if (n == "xrApplyHapticFeedback") return ours(&layer_apply_haptic_feedback);
+      if (n == "xrStopHapticFeedback") return ours(&layer_stop_haptic_feedback);
+    }
+    if (n.ends_with("PROPRIO") && n != "xrGetHandTrackingLatencyPROPRIO") {
+      using F = PFN_xrVoidFunction;
+      struct Entry {
+        std::string_view name;
+        F fn;
+      };
+      static const Entry kFingertip[] = {
+          {"xrCreateFingertipHapticsPROPRIO", reinterpret_cast<F>(&layer_create_fingertip_haptics)},
+          {"xrDestroyFingertipHapticsPROPRIO", reinterpret_cast<F>(&layer_destroy_fingertip_haptics)},
+          {"xrGetFingertipHapticsPropertiesPROPRIO", reinterpret_cast<F>(&layer_get_fingertip_haptics_properties)},
+          {"xrApplyFingertipForcesPROPRIO", reinterpret_cast<F>(&layer_apply_fingertip_forces)},
+          {"xrCreateHapticColliderPROPRIO", reinterpret_cast<F>(&layer_create_haptic_collider)},
+          {"xrSetHapticColliderPosePROPRIO", reinterpret_cast<F>(&layer_set_haptic_collider_pose)},
+          {"xrDestroyHapticColliderPROPRIO", reinterpret_cast<F>(&layer_destroy_haptic_collider)},
+          {"xrLocateProxyHandJointsPROPRIO", reinterpret_cast<F>(&layer_locate_proxy_hand_joints)},
+          {"xrGetFingertipHapticsStatePROPRIO", reinterpret_cast<F>(&layer_get_fingertip_haptics_state)},
+      };
+      for (const Entry& e : kFingertip) {
+        if (n != e.name) continue;
+        *function = fingertip ? e.fn : nullptr;
+        return fingertip ? XR_SUCCESS : XR_ERROR_FUNCTION_UNSUPPORTED;
+      }
     }
     if (hook_hands) {
       if (n == "xrCreateHandTrackerEXT") return ours(&layer_create_hand_tracker);
@@ -1183,7 +1820,6 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_get_instance_proc_addr(XrInstance instance,
       if (n == "xrSyncActions") return ours(&layer_sync_actions);
       if (n == "xrBeginFrame") return ours(&layer_begin_frame);
     }
-    if (hook_events && n == "xrPollEvent") return ours(&layer_poll_event);
     if (n == "xrGetHandTrackingLatencyPROPRIO") {
       if (!latency) {
         *function = nullptr;
@@ -1237,10 +1873,15 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
       inst->motion_range |= e == XR_EXT_HAND_JOINTS_MOTION_RANGE_EXTENSION_NAME;
       inst->data_source |= e == XR_EXT_HAND_TRACKING_DATA_SOURCE_EXTENSION_NAME;
       inst->latency |= e == XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME;
+      inst->fingertip |= e == XR_PROPRIO_FINGERTIP_HAPTICS_EXTENSION_NAME;
       inst->app_vive_tracker |= e == XR_HTCX_VIVE_TRACKER_INTERACTION_EXTENSION_NAME;
       app_convert_timespec |= e == XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME;
     }
-    if (inst->hand_tracking) start_sources(*inst);
+    // The config is read for hand tracking, and for haptics even in an app
+    // that tracks no hands (its vibrations can still reach the fingertips).
+    // Sources start only for hand tracking or the fingertip extension (the
+    // contact simulation follows the tracked hands).
+    if (load_config(*inst) && (inst->hand_tracking || inst->fingertip)) start_sources(*inst);
     const RuntimeHandTracking mode = inst->config.runtime_hand_tracking;
     inst->serving = inst->hand_tracking && (mode == RuntimeHandTracking::override_it ||
                                             (mode == RuntimeHandTracking::automatic && !inst->sources.empty()));
@@ -1257,7 +1898,9 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
       std::vector<const char*> names;
       for (uint32_t i = 0; i < info->enabledExtensionCount; ++i) {
         const std::string_view e(info->enabledExtensionNames[i]);
-        if (e == XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME) continue;
+        if (e == XR_PROPRIO_HAND_TRACKING_LATENCY_EXTENSION_NAME || e == XR_PROPRIO_FINGERTIP_HAPTICS_EXTENSION_NAME) {
+          continue;  // ours alone, never the runtime's
+        }
         if (strip_ours && is_ours(e) && !(x.hands && e == XR_EXT_HAND_TRACKING_EXTENSION_NAME)) continue;
         names.push_back(info->enabledExtensionNames[i]);
       }
@@ -1346,6 +1989,15 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
       }
     }
     d.poll_event = resolve<PFN_xrPollEvent>(gipa, *instance, "xrPollEvent");
+    if (inst->haptics_wanted()) {
+      d.apply_haptic_feedback = resolve<PFN_xrApplyHapticFeedback>(gipa, *instance, "xrApplyHapticFeedback");
+      d.stop_haptic_feedback = resolve<PFN_xrStopHapticFeedback>(gipa, *instance, "xrStopHapticFeedback");
+      const auto string_to_path = resolve<PFN_xrStringToPath>(gipa, *instance, "xrStringToPath");
+      const char* const paths[2] = {"/user/hand/left", "/user/hand/right"};
+      for (std::size_t h = 0; h < 2 && string_to_path; ++h) {
+        if (XR_FAILED(string_to_path(*instance, paths[h], &inst->haptic_hand_paths[h]))) inst->haptic_hand_paths[h] = XR_NULL_PATH;
+      }
+    }
     if (inst->serving && (any_wrist(*inst, WristSource::controller) || any_wrist(*inst, WristSource::tracker))) {
       d.string_to_path = resolve<PFN_xrStringToPath>(gipa, *instance, "xrStringToPath");
       d.create_action_set = resolve<PFN_xrCreateActionSet>(gipa, *instance, "xrCreateActionSet");

@@ -109,6 +109,7 @@ std::string LayerConfig::describe() const {
                 sources.size());
   std::string s = buf;
   for (std::size_t i = 0; i < sources.size(); ++i) s += "\n  [" + std::to_string(i) + "] " + sources[i].describe();
+  if (haptics.enabled) s += "\n  " + haptics.describe();
   return s;
 }
 
@@ -514,12 +515,88 @@ Result<SourceConfig> parse_source(const Config& c, std::size_t index) {
 
 }  // namespace
 
+std::string_view to_string(HapticDevices d) noexcept { return d == HapticDevices::hid ? "hid" : "emulated"; }
+
+std::string HapticsConfig::describe() const {
+  if (!enabled) return "haptics: none";
+  std::string s = "haptics: " + std::string(to_string(devices)) + " devices, model " + (model.empty() ? "(by kind)" : model);
+  for (std::size_t h = 0; h < 2; ++h) {
+    s += h == 0 ? "; left: " : "; right: ";
+    if (fingers[h].empty()) s += "none";
+    for (std::size_t i = 0; i < fingers[h].size(); ++i) s += (i ? "," : "") + std::string(to_string(fingers[h][i]));
+  }
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "; contact simulation %s, force scale %.3g, vibration gain %.3g", contact ? "allowed" : "off",
+                force_scale, vibration_gain);
+  return s + buf;
+}
+
+namespace {
+
+Result<HapticsConfig> parse_haptics(const Config& c) {
+  if (auto k = c.check_keys("haptics", {"devices", "model", "left", "right", "bind_left", "bind_right", "force_scale",
+                                        "contact", "vibration_gain"});
+      !k) {
+    return k.error();
+  }
+  HapticsConfig h;
+  h.enabled = true;
+  auto devices = choose<HapticDevices>(c, "devices", "emulated",
+                                       {{"emulated", HapticDevices::emulated}, {"hid", HapticDevices::hid}});
+  if (!devices) return devices.error();
+  h.devices = *devices;
+  auto model = c.get_string_or("model", h.devices == HapticDevices::hid ? "" : "platform_3dof");
+  if (!model) return model.error();
+  h.model = *model;
+  if (h.devices == HapticDevices::emulated && h.model.empty()) {
+    return make_error(Errc::invalid_argument, "model: emulated devices need a device model (e.g. \"platform_3dof\")");
+  }
+  const char* const keys[2] = {"left", "right"};
+  for (std::size_t side = 0; side < 2; ++side) {
+    if (!c.contains(keys[side])) continue;
+    auto names = c.get_strings(keys[side]);
+    if (!names) return names.error();
+    for (const auto& n : *names) {
+      auto f = parse_finger(n);
+      if (!f) {
+        return make_error(Errc::invalid_argument, std::string(keys[side]) + ": unknown finger '" + printable(n, 40) +
+                                                      "' (thumb, index, middle, ring, little)");
+      }
+      if (std::find(h.fingers[side].begin(), h.fingers[side].end(), *f) != h.fingers[side].end()) {
+        return make_error(Errc::invalid_argument, std::string(keys[side]) + ": finger '" + n + "' listed twice");
+      }
+      h.fingers[side].push_back(*f);
+    }
+    const std::string bind_key = std::string("bind_") + keys[side];
+    if (c.contains(bind_key)) {
+      auto binds = c.get_strings(bind_key);
+      if (!binds) return binds.error();
+      h.bindings[side] = *binds;
+    }
+  }
+  if (h.device_count() == 0) {
+    return make_error(Errc::invalid_argument, "lists no fingers: give left = [...] and/or right = [...], e.g. right = [\"index\"]");
+  }
+  auto scale = c.get_double_or("force_scale", 1.0, 1e-3, 10.0);
+  if (!scale) return scale.error();
+  h.force_scale = *scale;
+  auto contact = c.get_bool_or("contact", true);
+  if (!contact) return contact.error();
+  h.contact = *contact;
+  auto gain = c.get_double_or("vibration_gain", 0.5, 0.0, 1.0);
+  if (!gain) return gain.error();
+  h.vibration_gain = *gain;
+  return h;
+}
+
+}  // namespace
+
 Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::string& source_name) {
   auto c = Config::parse(toml_text, source_name);
   if (!c) return c.error();
   LayerConfig cfg;
   cfg.origin = source_name;
-  if (auto k = c->check_keys("top level", {"layer", "source"}); !k) return k.error();
+  if (auto k = c->check_keys("top level", {"layer", "source", "haptics"}); !k) return k.error();
   if (c->contains("layer")) {
     auto layer = c->table("layer");
     if (!layer) return layer.error();
@@ -538,6 +615,13 @@ Result<LayerConfig> parse_layer_config(std::string_view toml_text, const std::st
     auto stale = layer->get_double_or("stale_timeout_ms", 500.0, 0.0, 10000.0);
     if (!stale) return stale.error();
     cfg.stale_timeout_ns = seconds_to_ns(*stale * 1e-3);
+  }
+  if (c->contains("haptics")) {
+    auto h = c->table("haptics");
+    if (!h) return h.error();
+    auto parsed = parse_haptics(*h);
+    if (!parsed) return parsed.error().with_context(source_name + ": [haptics]");
+    cfg.haptics = std::move(*parsed);
   }
   if (c->contains("source")) {
     auto sources = c->tables("source");

@@ -156,6 +156,42 @@ Result<HandShape> HandShape::from_measurements(double L, double B) {
   return s;
 }
 
+namespace {
+// Index to little MCP in the wrist frame, for a hand of these sizes.
+double mcp_spread_m(double L, double B) {
+  const auto shape = HandShape::from_measurements(L, B);
+  if (!shape) return 0.0;
+  const auto T = HandModel(*shape).joint_poses_in_wrist(Handedness::right, HandAngles{});
+  return (T[index_of(HandJoint::index_proximal)].p - T[index_of(HandJoint::little_proximal)].p).norm();
+}
+}  // namespace
+
+Result<HandShape> HandShape::from_tracked_pose(const HandPose& pose) {
+  if (!pose.active || !pose.fully_valid()) {
+    return make_error(Errc::invalid_argument, "the hand's size needs an active pose with every joint valid");
+  }
+  constexpr HandJoint kChain[] = {HandJoint::middle_metacarpal, HandJoint::middle_proximal, HandJoint::middle_intermediate,
+                                  HandJoint::middle_distal, HandJoint::middle_tip};
+  double chain = 0.0;
+  for (std::size_t i = 0; i + 1 < std::size(kChain); ++i) chain += (pose.joint(kChain[i + 1]).p - pose.joint(kChain[i]).p).norm();
+  // from_measurements' middle chain is 0.928 L (Buchholz et al. 1992).
+  const double L = chain / 0.928;
+  const double spread = (pose.joint(HandJoint::index_proximal).p - pose.joint(HandJoint::little_proximal).p).norm();
+  if (!(L >= 0.10 && L <= 0.30)) return from_measurements(L, 0.10);  // its message says why
+  // The spread grows with the width; bisect for the width that gives it.
+  double lo = 0.05, hi = 0.16;
+  if (!(spread >= mcp_spread_m(L, lo) && spread <= mcp_spread_m(L, hi))) {
+    char buf[200];
+    std::snprintf(buf, sizeof buf, "index-to-little MCP spread %.1f mm does not fit a hand %.0f mm long", spread * 1e3, L * 1e3);
+    return make_error(Errc::out_of_range, buf);
+  }
+  for (int i = 0; i < 40; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (mcp_spread_m(L, mid) < spread ? lo : hi) = mid;
+  }
+  return from_measurements(L, 0.5 * (lo + hi));
+}
+
 std::string HandShape::describe() const {
   char buf[256];
   std::snprintf(buf, sizeof buf,

@@ -146,7 +146,7 @@ void App::Impl::read_servo_snapshot() {
   if (!servo) return;
   const haptics::ServoSnapshot* snap = servo->latest();
   if (!snap) return;
-  proxy = snap->proxy;
+  proxy = snap->hands[0].proxy;
   // Free bodies move in live runs too: the servo thread publishes their poses.
   for (std::size_t i = 0; i < entity_free_object.size() && i < entity_poses.size(); ++i) {
     const int k = entity_free_object[i];

@@ -47,7 +47,7 @@ void LiveTrial::on_frame(engine::FrameContext& c) {
   elapsed_s_ = carried_s_ + 1e-9 * static_cast<double>(c.time_ns - start_ns_);
   double force = 0.0;
   if (c.servo != nullptr) {
-    force = grasp_force_n(c.servo->object_normal_n);
+    force = grasp_force_n(c.servo->hands[0].object_normal_n);
     if (std::isfinite(force)) {
       peak_ = std::max(peak_, force);
       if (force > 0.05) {

@@ -34,8 +34,8 @@ Percept perceive(const PegWorld& w) {
   p.time_ns = w.now_ns();
   p.T_world_peg = w.peg_pose();
   p.peg_rgba = w.peg_rgba();
-  p.T_world_proxy_wrist = s.proxy.joint(HandJoint::wrist);
-  for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.proxy.joint(tip_of(static_cast<Finger>(f))).p;
+  p.T_world_proxy_wrist = s.hands[0].proxy.joint(HandJoint::wrist);
+  for (std::size_t f = 0; f < kFingerCount; ++f) p.p_proxy_tip_in_world[f] = s.hands[0].proxy.joint(tip_of(static_cast<Finger>(f))).p;
   p.hole = w.hole();
   // Touch: what each device renders (its force sensors), nothing else.
   for (std::size_t c = 0; c < s.channel_count; ++c) {
@@ -104,7 +104,7 @@ Result<TrialResult> run_simulated_trial(const PegInHoleConfig& config, const Tri
     if (rec && (tick % record_every == 0 || ev.kind != PegEvent::Kind::none)) {
       const HandPose tracked = model.forward(Handedness::right, cmd.angles, cmd.T_world_wrist, world.now_ns());
       Status st = rec->write(s_tracked, tracked);
-      if (st) st = rec->write(s_proxy, world.snapshot().proxy);
+      if (st) st = rec->write(s_proxy, world.snapshot().hands[0].proxy);
       if (st) st = rec->write(s_peg, RigidPose{world.peg_pose()}, world.now_ns());
       if (st && ev.kind != PegEvent::Kind::none) {
         static const char* names[] = {"none", "break", "respawn", "drop", "inserted"};

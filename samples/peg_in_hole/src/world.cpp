@@ -142,7 +142,7 @@ PegEvent PegWorld::step() {
   if (const haptics::ServoSnapshot* s = servo_->latest()) snapshot_ = *s;
   if (auto p = servo_->simulation().object_pose("peg")) peg_pose_ = *p;
 
-  const double force = grasp_force_n(snapshot_.object_normal_n);
+  const double force = grasp_force_n(snapshot_.hands[0].object_normal_n);
   if (std::isfinite(force)) {
     peak_force_n_ = std::max(peak_force_n_, force);
     if (force > 0.05) {

@@ -74,14 +74,14 @@ TEST(ServoLoop, PressingTheTableReachesTheDeviceThroughTheGate) {
   rig.run(0.0, 2.5);  // approach, press, slide halfway
   const ServoSnapshot* snap = rig.loop->latest();
   ASSERT_NE(snap, nullptr);
-  EXPECT_GT(snap->contact[1].normal_n, 0.3) << "index presses the table";
-  EXPECT_NEAR(rig.index_sink->measured().normal_n, snap->on_pad[1].normal_n, 0.05 * snap->on_pad[1].normal_n + 0.02)
+  EXPECT_GT(snap->hands[0].contact[1].normal_n, 0.3) << "index presses the table";
+  EXPECT_NEAR(rig.index_sink->measured().normal_n, snap->hands[0].on_pad[1].normal_n, 0.05 * snap->hands[0].on_pad[1].normal_n + 0.02)
       << "the device gets the simulation's force as the pad feels it, ramped in";
   EXPECT_TRUE(rig.index_sink->last_enabled());
   EXPECT_EQ(snap->channels[0].gate, GateState::active);
   EXPECT_LE(rig.index_sink->measured().normal_n, rig.loop->gate(0).limits().max_normal_n);
   // Sliding along +x: the finger is dragged back, shear opposes the motion.
-  EXPECT_GT(snap->proxy.joint(HandJoint::index_tip).p.y(), 0.999) << "the proxy stays on the table";
+  EXPECT_GT(snap->hands[0].proxy.joint(HandJoint::index_tip).p.y(), 0.999) << "the proxy stays on the table";
 }
 
 TEST(ServoLoop, WithoutHapticsTheDeviceGetsZeroWhileTheSimulationRuns) {
@@ -90,7 +90,7 @@ TEST(ServoLoop, WithoutHapticsTheDeviceGetsZeroWhileTheSimulationRuns) {
   Rig rig(o);
   rig.loop->engage(kNsPerSecond);
   rig.run(0.0, 2.0);
-  EXPECT_GT(rig.loop->latest()->contact[1].normal_n, 0.3);
+  EXPECT_GT(rig.loop->latest()->hands[0].contact[1].normal_n, 0.3);
   EXPECT_EQ(rig.index_sink->measured().normal_n, 0.0);
 }
 
@@ -103,8 +103,8 @@ TEST(ServoLoop, ForceScaleScalesWhatTheDeviceGetsNotTheSimulation) {
   full.loop->engage(kNsPerSecond);
   half.run(0.0, 2.0);
   full.run(0.0, 2.0);
-  const double simulated = half.loop->latest()->on_pad[1].normal_n;
-  EXPECT_NEAR(simulated, full.loop->latest()->on_pad[1].normal_n, 1e-9) << "the simulation does not see the scale";
+  const double simulated = half.loop->latest()->hands[0].on_pad[1].normal_n;
+  EXPECT_NEAR(simulated, full.loop->latest()->hands[0].on_pad[1].normal_n, 1e-9) << "the simulation does not see the scale";
   ASSERT_GT(simulated, 0.3);
   ASSERT_LT(simulated, 2.0 * half.loop->gate(0).limits().max_normal_n) << "else the clamp hides the scale";
   EXPECT_NEAR(half.index_sink->measured().normal_n, 0.5 * simulated, 0.03 * simulated + 0.01);
@@ -253,7 +253,7 @@ TipEndPress press_the_tip_end(const std::shared_ptr<const FingertipDeviceModel>&
     servo.submit_tracked_hand(now, T, a);
     servo.tick(now);
     const ServoSnapshot& snap = *servo.latest();
-    const FingertipForce contact = snap.contact[1];
+    const FingertipForce contact = snap.hands[0].contact[1];
     const double contact_n = contact.in_tip_frame().norm();
     const FingertipForce commanded = snap.channels[0].commanded;
     const double step = limits.max_rate_n_per_s * dt;
@@ -279,7 +279,7 @@ TEST(ServoLoop, ATipEndPressIsRenderedAsTheContactForcesMagnitudeThroughout) {
   auto device = force_vector_device();
   const double max_normal = device->limits().max_normal_n;
   const TipEndPress r = press_the_tip_end(
-      device, [](const ServoSnapshot& s) { return s.contact[1].in_tip_frame().norm(); },
+      device, [](const ServoSnapshot& s) { return s.hands[0].contact[1].in_tip_frame().norm(); },
       [](const FingertipForce& f) { return f.in_tip_frame().norm(); });
   ASSERT_GT(r.pressing_ticks, 1500) << "the script presses for most of a period";
   ASSERT_GT(r.end_on_ticks, 100) << "the press is on the tip's end (else this tests nothing new)";
@@ -297,7 +297,7 @@ TEST(ServoLoop, ATipEndPressIsRenderedAsPadPressureOnTheBand) {
   auto device = shipped_device("band_2dof");
   const double max_normal = device->limits().max_normal_n;
   const TipEndPress r = press_the_tip_end(
-      device, [](const ServoSnapshot& s) { return s.contact_normal_n[1]; },
+      device, [](const ServoSnapshot& s) { return s.hands[0].contact_normal_n[1]; },
       [](const FingertipForce& f) { return f.normal_n; });
   ASSERT_GT(r.end_on_ticks, 100);
   EXPECT_LT(r.max_deficit_n, 0.05 * max_normal) << "worst at t " << r.worst_t_s << " s";

@@ -24,10 +24,22 @@
 //     never tunnels, and what makes the rendered hand penetration-free.
 //   * The proxy's weight is compensated: the user's arm carries the real hand.
 //
+// Two hands share one world (issue 29): each proxy has its own coupling and
+// fingertips, both touch the same objects, so one hand can hand a peg to the
+// other or both can hold it. Proxies do not collide with each other: the
+// user's real hands already stop each other, and a proxy held back by the
+// other would pull the user's fingers through their own hand.
+//
+// Colliders (ContactSimOptions::collider_slots): kinematic shapes an app
+// places and moves at run time (the OpenXR layer's XR_PROPRIO_fingertip_haptics
+// colliders). They are MuJoCo mocap bodies made once with the model; a free
+// slot waits far below the floor, so setting one never recompiles the model.
+//
 // Threading: one thread owns a ContactSimulation (the servo loop). step() and
 // the accessors do not allocate, lock or throw.
 #include <array>
 #include <memory>
+#include <span>
 #include <string>
 
 #include "proprio/core/hand_model.hpp"
@@ -105,6 +117,8 @@ struct ContactSimOptions {
   // Fingertip force low-pass: first order, 2-5 ms (MuJoCo's contact forces
   // chatter step to step; skin does not feel above a few hundred Hz).
   double force_filter_time_constant_s = 0.003;
+  // Kinematic collider slots (set_collider), at most kMaxColliderSlots.
+  int collider_slots = 0;
 
   std::string describe() const;
   Status validate() const;
@@ -143,11 +157,33 @@ struct ContactSimStats {
   int last_contact_count = 0;
 };
 
+// One proxy hand of the world: the user's hand shape and which hand it is.
+struct ProxyHandSpec {
+  HandModel model;
+  Handedness hand = Handedness::right;
+};
+inline constexpr std::size_t kMaxProxyHands = 2;
+inline constexpr int kMaxColliderSlots = 64;
+
+// A collider's shape (sizes as SceneObject's): sphere, box, capsule or
+// cylinder, the axis of the last two along its z.
+struct ColliderShape {
+  ShapeKind shape = ShapeKind::sphere;
+  Vec3 half_extents_m = Vec3(0.05, 0.05, 0.05);
+  double radius_m = 0.05;
+  double half_length_m = 0.05;
+  double friction = 0.8;
+  // The shape is one of the four, sizes in [0.1 mm, 10 m], friction in [0, 2].
+  Status validate() const;
+};
+
 class ContactSimulation {
  public:
-  // Builds the MuJoCo model for this hand shape and scene. Errors name the
-  // object or option that is wrong; a MuJoCo compile error is passed on with
-  // the generated MJCF's line.
+  // Builds the MuJoCo model for these hands (one or two, one per side) and
+  // scene. Errors name the object or option that is wrong; a MuJoCo compile
+  // error is passed on with the generated MJCF's line.
+  static Result<ContactSimulation> create(std::span<const ProxyHandSpec> hands, const HapticScene& scene,
+                                          const ContactSimOptions& options = {});
   static Result<ContactSimulation> create(const HandModel& hand_model, Handedness hand, const HapticScene& scene,
                                           const ContactSimOptions& options = {});
   ContactSimulation(ContactSimulation&&) noexcept;
@@ -158,24 +194,35 @@ class ContactSimulation {
   const std::string& mjcf() const;
 
   // Moves the proxy (and its target) to this pose at once, zero velocity.
-  void reset_hand(const Pose& T_world_wrist, const HandAngles& angles) noexcept;
+  // `h` below: the hand's index in create()'s list (0 with one hand).
+  void reset_hand(const Pose& T_world_wrist, const HandAngles& angles, std::size_t h = 0) noexcept;
   // The tracked hand the proxy is coupled to from now on. Non-finite input is
   // ignored (the previous target stays) and counted.
-  void set_target(const Pose& T_world_wrist, const HandAngles& angles) noexcept;
+  void set_target(const Pose& T_world_wrist, const HandAngles& angles, std::size_t h = 0) noexcept;
   // Advances one timestep and updates the fingertip contacts.
   void step() noexcept;
 
   TimeNs time_ns() const noexcept;
-  Handedness hand() const noexcept;
+  std::size_t hand_count() const noexcept;
+  // The index of the proxy for this side, or -1 when the world has none.
+  int hand_index(Handedness side) const noexcept;
+  Handedness hand(std::size_t h = 0) const noexcept;
   // The proxy's kinematic model (immutable: safe to read from any thread).
-  const HandModel& hand_model() const noexcept;
+  const HandModel& hand_model(std::size_t h = 0) const noexcept;
   // The proxy as a fully tracked HandPose: what to render.
-  HandPose proxy_pose(TimeNs time_ns) const;
-  Pose proxy_wrist() const noexcept;
-  HandAngles proxy_angles() const noexcept;
+  HandPose proxy_pose(TimeNs time_ns, std::size_t h = 0) const;
+  Pose proxy_wrist(std::size_t h = 0) const noexcept;
+  HandAngles proxy_angles(std::size_t h = 0) const noexcept;
   // Thumb, index, middle, ring, little.
-  const std::array<FingertipContact, kFingerCount>& fingertips() const noexcept;
-  const FingertipContact& fingertip(Finger finger) const noexcept;
+  const std::array<FingertipContact, kFingerCount>& fingertips(std::size_t h = 0) const noexcept;
+  const FingertipContact& fingertip(Finger finger, std::size_t h = 0) const noexcept;
+  // Collider slots: shape (ColliderShape::validate() first; false for a bad
+  // slot, shape or pose) and pose; a removed slot goes back below the floor.
+  // Allocation-free.
+  int collider_slot_count() const noexcept;
+  bool set_collider(int slot, const ColliderShape& shape, const Pose& T_world_collider) noexcept;
+  bool move_collider(int slot, const Pose& T_world_collider) noexcept;
+  void remove_collider(int slot) noexcept;
   // A free object's pose (Errc::not_found for unknown or fixed objects).
   Result<Pose> object_pose(std::string_view name) const;
   // The free objects (scene order) and their poses by index: the servo loop
@@ -205,6 +252,8 @@ class ContactSimulation {
 };
 
 // The MJCF ContactSimulation compiles (exposed for tests and `proprio haptics mjcf`).
+Result<std::string> generate_mjcf(std::span<const ProxyHandSpec> hands, const HapticScene& scene,
+                                  const ContactSimOptions& options);
 Result<std::string> generate_mjcf(const HandModel& hand_model, Handedness hand, const HapticScene& scene,
                                   const ContactSimOptions& options);
 

@@ -1,11 +1,15 @@
 #pragma once
 // The 1 kHz haptic servo loop. Each tick it:
-//   1. takes the newest tracked hand from a mailbox (any thread submits it),
-//   2. steps the contact simulation (proxy hand under virtual coupling),
+//   1. takes the newest tracked hands from their mailboxes (any thread submits
+//      them; one or two hands, as the contact simulation has proxies),
+//   2. steps the contact simulation (proxy hands under virtual coupling, both
+//      in one world) unless it is switched off (forces only),
 //   3. reads each fingertip's contact force, as its pad feels it
 //      (FingertipContact::on_pad: a press on the tip's end is pad pressure),
-//   4. passes it through that device's safety gate (clamp, rate limit,
-//      ramp-in, watchdog, NaN -> zero),
+//   4. adds what an ExtraForces source asks for (an app's own forces and
+//      vibrations, through the OpenXR layer), scales, and passes the sum
+//      through that device's safety gate (clamp, rate limit, ramp-in,
+//      watchdog, NaN -> zero),
 //   5. maps it to motor angles with the device model, and
 //   6. hands both to the device's sink (HID driver or emulator).
 // Nothing in a tick allocates, locks or throws. The proxy pose and the
@@ -54,9 +58,32 @@ struct ServoChannel {
   Finger finger = Finger::index;
   std::shared_ptr<const FingertipDeviceModel> model;
   std::shared_ptr<FingertipSink> sink;  // null: computed and published, sent nowhere
+  // Which proxy of the contact simulation the finger belongs to
+  // (ContactSimulation::hand_index; 0 with one hand).
+  std::size_t hand = 0;
 };
 
-inline constexpr std::size_t kMaxServoChannels = kFingerCount;
+inline constexpr std::size_t kMaxServoChannels = kMaxProxyHands * kFingerCount;
+
+// Forces added to the contact forces before a channel's gate: an app's own
+// forces, vibrations. Servo thread, every tick and channel: must not block,
+// allocate or throw. A non-finite force faults that channel's gate (zero).
+class ExtraForces {
+ public:
+  virtual ~ExtraForces() = default;
+  virtual FingertipForce force(std::size_t channel, TimeNs now) noexcept = 0;
+};
+
+// The kinematic colliders of the simulation's slots, as one table: whoever
+// owns them (one thread) publishes the whole table when any changes.
+struct ColliderTable {
+  struct Slot {
+    bool active = false;
+    ColliderShape shape;
+    Pose T_world_collider;
+  };
+  std::array<Slot, kMaxColliderSlots> slots{};
+};
 
 struct ServoLoopOptions {
   DurationNs period_ns = kNsPerMillisecond;
@@ -71,7 +98,7 @@ struct ServoLoopOptions {
   // simulation runs unchanged.
   bool remove_finger_abduction = false;
   bool haptics_enabled = true;
-  // Rendered force = force_scale x simulated contact force, before the
+  // Rendered force = force_scale x simulated contact force (+ extra forces, unscaled), before the
   // safety gate's clamps. A fingertip device presses at most a couple of
   // newtons, so a task whose forces matter up to 5 N is scaled into the
   // device's range; at 1 everything above max_normal_n feels the same.
@@ -86,13 +113,21 @@ struct ServoLoopOptions {
 struct ServoSnapshot {
   TimeNs time_ns = 0;
   std::uint64_t tick = 0;
-  HandPose proxy;  // the rendered hand
-  std::array<FingertipForce, kFingerCount> contact{};  // the simulation's (filtered) fingertip forces
-  std::array<FingertipForce, kFingerCount> on_pad{};   // FingertipContact::on_pad: what the devices are sent (before scale and gate)
-  std::array<double, kFingerCount> contact_normal_n{};  // FingertipContact::contact_normal_n
-  std::array<double, kFingerCount> object_normal_n{};   // FingertipContact::object_normal_n
+  // Per proxy hand, in the simulation's order.
+  struct Hand {
+    Handedness side = Handedness::right;
+    HandPose proxy;  // the rendered hand
+    std::array<FingertipForce, kFingerCount> contact{};  // the simulation's (filtered) fingertip forces
+    std::array<FingertipForce, kFingerCount> on_pad{};   // FingertipContact::on_pad: what the devices are sent (before scale and gate)
+    std::array<double, kFingerCount> contact_normal_n{};  // FingertipContact::contact_normal_n
+    std::array<double, kFingerCount> object_normal_n{};   // FingertipContact::object_normal_n
+  };
+  std::array<Hand, kMaxProxyHands> hands{};
+  std::size_t hand_count = 0;
+  bool simulating = true;  // false: the simulation was switched off (contact forces zero)
   struct Channel {
     Finger finger = Finger::index;
+    std::size_t hand = 0;
     FingertipForce commanded;  // after the safety gate
     FingertipForce measured;   // what the sink reports
     MotorAngles motors;
@@ -129,11 +164,25 @@ class ServoLoop {
   ServoLoop(const ServoLoop&) = delete;
   ServoLoop& operator=(const ServoLoop&) = delete;
 
-  // Any one producer thread: the tracked hand (inverse kinematics runs here,
-  // on the caller's thread, not in the loop). Inactive or non-finite poses
-  // are counted and dropped.
+  // Any one producer thread per hand: the tracked hand (inverse kinematics
+  // runs here, on the caller's thread, not in the loop). The pose's side
+  // picks the proxy; poses of a side the simulation lacks, inactive or
+  // non-finite poses are counted and dropped.
   void submit_tracked_hand(const HandPose& pose);
-  void submit_tracked_hand(TimeNs time_ns, const Pose& T_world_wrist, const HandAngles& angles);
+  void submit_tracked_hand(TimeNs time_ns, const Pose& T_world_wrist, const HandAngles& angles, std::size_t hand = 0);
+
+  // Before start(): where extra forces come from (null: none).
+  void set_extra_forces(std::shared_ptr<ExtraForces> extra) { extra_ = std::move(extra); }
+  // Any thread: skip the contact simulation's step (its forces read zero)
+  // while off; the channels still run (forces only). Takes effect next tick.
+  void set_simulation_enabled(bool on) noexcept { simulate_.store(on, std::memory_order_release); }
+  // Any thread: engage every gate (ramp-in) or disengage and zero them at
+  // the next tick, e.g. when an app gains or loses input focus.
+  void request_output(bool on) noexcept {
+    output_request_.store(on ? kRequestOn : kRequestOff, std::memory_order_release);
+  }
+  // One producer thread: the colliders, applied at the next tick.
+  void publish_colliders(const ColliderTable& table) { colliders_.publish(table); }
 
   // Starts the 1 kHz thread. Errc::invalid_argument if running.
   Status start();
@@ -168,6 +217,7 @@ class ServoLoop {
             const Clock& clock);
   void run();
   void record(std::array<std::atomic<std::uint32_t>, 4096>& histogram, DurationNs value_ns) noexcept;
+  static constexpr int kRequestNone = 0, kRequestOn = 1, kRequestOff = 2;
 
   ContactSimulation simulation_;
   std::vector<ServoChannel> channels_;
@@ -175,11 +225,16 @@ class ServoLoop {
   ServoLoopOptions options_;
   const Clock& clock_;
 
-  Mailbox<Target> targets_;
+  std::array<Mailbox<Target>, kMaxProxyHands> targets_;
   Mailbox<ServoSnapshot> snapshots_;
+  Mailbox<ColliderTable> colliders_;
+  ColliderTable collider_scratch_;
   ServoSnapshot scratch_;
-  TimeNs last_target_ns_ = 0;
-  bool have_target_ = false;
+  std::array<TimeNs, kMaxProxyHands> last_target_ns_{};
+  std::array<bool, kMaxProxyHands> have_target_{};
+  std::shared_ptr<ExtraForces> extra_;
+  std::atomic<bool> simulate_{true};
+  std::atomic<int> output_request_{kRequestNone};
 
   // 10 us bins up to 40.96 ms; the last bin collects everything beyond.
   std::array<std::atomic<std::uint32_t>, 4096> jitter_histogram_{};

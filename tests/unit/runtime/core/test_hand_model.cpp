@@ -228,3 +228,28 @@ TEST(HandJoint, OrderAndNamesMatchOpenXr) {
   EXPECT_FALSE(parent_of(HandJoint::palm).has_value());
   EXPECT_EQ(tip_of(Finger::middle), HandJoint::middle_tip);
 }
+
+// The contact simulation's proxy takes the tracked hand's size (issue 29):
+// whatever the posture, the measurements come back from the joints alone.
+TEST(HandShape, MeasuredFromATrackedPoseInAnyPosture) {
+  for (const auto& [L, B] : {std::pair{0.165, 0.085}, std::pair{0.19, 0.10}, std::pair{0.215, 0.112}}) {
+    const HandModel m = model(L, B);
+    HandAngles a{};
+    for (std::size_t i = 0; i < kHandDofCount; ++i) a[i] = 0.3 * std::sin(1.7 * static_cast<double>(i) + 10.0 * L);
+    for (Handedness side : {Handedness::left, Handedness::right}) {
+      const HandPose pose = m.forward(side, a, Pose{Quat(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized())),
+                                                    Vec3(0.1, 1.2, -0.3)}, 0);
+      auto shape = HandShape::from_tracked_pose(pose);
+      ASSERT_TRUE(shape.ok()) << shape.error().message;
+      EXPECT_NEAR(shape->hand_length_m, L, 1e-6);
+      EXPECT_NEAR(shape->hand_width_m, B, 1e-5);
+    }
+  }
+  HandPose inactive;
+  EXPECT_FALSE(HandShape::from_tracked_pose(inactive).ok());
+  HandPose giant = model().forward(Handedness::right, HandAngles{}, Pose{}, 0);
+  for (auto& T : giant.T_world_joint) T.p *= 3.0;
+  const auto refused = HandShape::from_tracked_pose(giant);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("0.10-0.30 m"), std::string::npos) << refused.error().message;
+}

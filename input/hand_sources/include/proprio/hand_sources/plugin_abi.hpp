@@ -1,6 +1,8 @@
 #pragma once
-// The contract between the hand-source factory and a source plugin
-// (libproprio_source_<family>.so). A plugin exports exactly one symbol,
+// The contract between the hand-source factory and a plugin
+// (libproprio_source_<family>.so): a hand-source family (vist, stretch_glove,
+// ftm), or the fingertip devices behind the OpenXR layer's haptics (family
+// "haptics", whose table has start_haptics and whose start refuses). A plugin exports exactly one symbol,
 // `proprio_hand_source_plugin_v1`, returning a table the host checks before
 // using anything else in it:
 //   - struct_size and abi_version first (their offsets never change), so a
@@ -24,12 +26,13 @@
 #include "proprio/core/result.hpp"
 #include "proprio/core/time.hpp"
 #include "proprio/core/tracked_pose_provider.hpp"
+#include "proprio/openxr_layer/fingertip_haptics_service.hpp"
 #include "proprio/openxr_layer/layer_config.hpp"
 
 namespace proprio::hand_sources {
 
 // Bump when the table's layout or meaning changes.
-inline constexpr std::uint32_t kPluginAbiVersion = 2;
+inline constexpr std::uint32_t kPluginAbiVersion = 3;
 inline constexpr const char* kPluginEntryPoint = "proprio_hand_source_plugin_v1";
 
 // What a plugin's start returns.
@@ -53,6 +56,10 @@ struct HandSourcePluginV1 {
   // The address of the spdlog logger the plugin's copy of proprio::logger()
   // writes to: the host checks it is its own (one logger per process).
   const void* (*logger_address)() noexcept = nullptr;
+  // The "haptics" family only (null in the others): starts the devices a
+  // [haptics] table configures, zeroed and stopped when the service is destroyed.
+  Result<std::unique_ptr<openxr_layer::FingertipHapticsService>> (*start_haptics)(
+      const openxr_layer::HapticsConfig& config) noexcept = nullptr;
 };
 
 using PluginEntryPointV1 = const HandSourcePluginV1* (*)() noexcept;
@@ -93,5 +100,26 @@ inline const void* plugin_logger_address() noexcept { return &logger(); }
               family_name " plugin", [&] { return start_fn(config, max_prediction_ns, poses); });                   \
         },                                                                                                           \
         &::proprio::hand_sources::plugin_logger_address};                                                            \
+    return &table;                                                                                                   \
+  }
+
+// The "haptics" plugin's entry point: `start_fn`
+// (Result<std::unique_ptr<FingertipHapticsService>>(const HapticsConfig&), which may throw).
+#define PROPRIO_DEFINE_HAPTICS_PLUGIN(start_fn)                                                                      \
+  extern "C" __attribute__((visibility("default"))) const ::proprio::hand_sources::HandSourcePluginV1*              \
+  proprio_hand_source_plugin_v1() noexcept {                                                                         \
+    static const ::proprio::hand_sources::HandSourcePluginV1 table{                                                  \
+        sizeof(::proprio::hand_sources::HandSourcePluginV1), ::proprio::hand_sources::kPluginAbiVersion,            \
+        PROPRIO_HAND_SOURCE_BUILD_ID, "haptics",                                                                     \
+        [](const ::proprio::openxr_layer::SourceConfig&, ::proprio::DurationNs,                                     \
+           ::proprio::TrackedPoseProvider*) noexcept -> ::proprio::Result<::proprio::hand_sources::PluginStarted> { \
+          return ::proprio::make_error(::proprio::Errc::unsupported, "the haptics plugin serves no hand source");   \
+        },                                                                                                           \
+        &::proprio::hand_sources::plugin_logger_address,                                                             \
+        [](const ::proprio::openxr_layer::HapticsConfig& config) noexcept {                                          \
+          return ::proprio::hand_sources::plugin_guarded<                                                            \
+              std::unique_ptr<::proprio::openxr_layer::FingertipHapticsService>>("haptics plugin",                  \
+                                                                                 [&] { return start_fn(config); }); \
+        }};                                                                                                          \
     return &table;                                                                                                   \
   }

@@ -112,6 +112,38 @@ struct SourceConfig {
   std::string describe() const;
 };
 
+// [haptics]: fingertip devices the layer drives for XR_PROPRIO_fingertip_haptics
+// and the apps' xrApplyHapticFeedback (docs/xr-proprio-fingertip-haptics.md).
+enum class HapticDevices { emulated, hid };
+std::string_view to_string(HapticDevices d) noexcept;
+
+struct HapticsConfig {
+  bool enabled = false;  // a [haptics] table is present
+  // emulated: in-process device emulators speaking the real wire bytes (no
+  // hardware); hid: fingertip devices on USB HID.
+  HapticDevices devices = HapticDevices::emulated;
+  // The device model: a name under config/haptics ("platform_3dof",
+  // "band_2dof", "force_vector") or a path to a model file. hid: empty
+  // takes the shipped model for the kind each device reports.
+  std::string model = "platform_3dof";
+  // Which fingers carry a device, per hand (left, right).
+  std::array<std::vector<Finger>, 2> fingers;
+  // hid: "FINGER=SERIAL" or "FINGER=/dev/hidrawN" per hand (as proprio run --bind).
+  std::array<std::vector<std::string>, 2> bindings;
+  // The contact simulation's forces x this (an app's own forces are not scaled).
+  double force_scale = 1.0;
+  // Whether apps may run the contact simulation (it costs one core's
+  // fraction at 1 kHz while a contact-mode XrFingertipHapticsPROPRIO lives).
+  bool contact = true;
+  // xrApplyHapticFeedback on /user/hand/{left,right}: a press of
+  // amplitude x this x the device's largest normal force, for the duration.
+  // 0 turns the mapping off.
+  double vibration_gain = 0.5;
+
+  std::size_t device_count() const noexcept { return fingers[0].size() + fingers[1].size(); }
+  std::string describe() const;
+};
+
 struct LayerConfig {
   RuntimeHandTracking runtime_hand_tracking = RuntimeHandTracking::automatic;
   DurationNs max_prediction_ns = 50 * kNsPerMillisecond;  // furthest extrapolation past the newest pose
@@ -119,6 +151,7 @@ struct LayerConfig {
   // not tracked for this long; after that the hand is inactive.
   DurationNs stale_timeout_ns = 500 * kNsPerMillisecond;
   std::vector<SourceConfig> sources;
+  HapticsConfig haptics;
   std::string origin;  // the file it came from, for messages
 
   std::string describe() const;

@@ -95,6 +95,12 @@ struct HandShape {
   // Scales a generic hand to these measurements. Errors (Errc::out_of_range)
   // when the numbers are not plausible adult hand sizes in metres.
   static Result<HandShape> from_measurements(double hand_length_m, double hand_width_m);
+  // The measurements of a tracked hand, in any posture: its length from the
+  // middle finger's joint-to-joint chain, its width from the spread of the
+  // index and little MCPs (both rigid in this model), then
+  // from_measurements(). Errors for an inactive or partly valid pose, or one
+  // whose sizes are not an adult hand's.
+  static Result<HandShape> from_tracked_pose(const HandPose& pose);
   std::string describe() const;
 };
 

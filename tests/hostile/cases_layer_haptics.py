@@ -1,0 +1,59 @@
+"""Fingertip haptics in the OpenXR layer (issue 29): a bad [haptics] table
+stops the config with the file and what is allowed; a hostile device model
+named by it costs the app its fingertip devices, said in the log, and the app
+runs on without a hang (docs/xr-proprio-fingertip-haptics.md)."""
+from pathlib import Path
+
+from hostile import case
+
+LAYER = "XR_APILAYER_PROPRIO_hand_tracking"
+SOURCE = '[[source]]\ntype = "sim"\nspace = "local"\n'
+HAPTICS = '[haptics]\ndevices = "emulated"\nright = ["index"]\n'
+
+
+def status(t, config):
+    return t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))})
+
+
+def probe(t, config):
+    t.need(bool(t.opts.mock_runtime_json) and Path(t.opts.mock_runtime_json).exists(),
+           "no mock OpenXR runtime manifest (--mock-runtime-json)")
+    t.need(bool(t.opts.layer_dir) and Path(t.opts.layer_dir).is_dir(), "no built layer (--layer-dir)")
+    env = {"XR_RUNTIME_JSON": str(Path(t.opts.mock_runtime_json).resolve()),
+           "XR_API_LAYER_PATH": str(Path(t.opts.layer_dir).resolve()),
+           "XR_ENABLE_API_LAYERS": LAYER,
+           "PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))}
+    return t.run("xr-probe", "--seconds", "1", "--hand", "right", "--space", "local", env=env, timeout=90)
+
+
+@case("29 [haptics] with an unknown finger, a finger twice, or no fingers: refused, the finger or the fix named")
+def _(t):
+    status(t, SOURCE + '[haptics]\nright = ["pinky"]\n').expect(rc={1, 2}, out=r"unknown finger 'pinky'.*thumb, index")
+    status(t, SOURCE + '[haptics]\nleft = ["index", "index"]\n').expect(rc={1, 2}, out=r"'index' listed twice")
+    status(t, SOURCE + '[haptics]\ndevices = "emulated"\n').expect(rc={1, 2}, out=r"lists no fingers")
+
+
+@case("29 [haptics] devices = \"usb\", an unknown key, a force scale of 100: refused with the choices / key / range")
+def _(t):
+    status(t, SOURCE + HAPTICS.replace('"emulated"', '"usb"')).expect(rc={1, 2}, out=r"emulated, hid")
+    status(t, SOURCE + HAPTICS + 'gain = 2\n').expect(rc={1, 2}, out=r"gain")
+    status(t, SOURCE + HAPTICS + 'force_scale = 100\n').expect(rc={1, 2}, out=r"layer.toml.*force_scale")
+    status(t, SOURCE + HAPTICS + 'force_scale = nan\n').expect(rc={1, 2}, out=r"force_scale")
+
+
+@case("29 emulated devices without a model: refused, an example given")
+def _(t):
+    status(t, SOURCE + HAPTICS + 'model = ""\n').expect(rc={1, 2}, out=r"need a device model.*platform_3dof")
+
+
+@case("29 a device model that is a FIFO: no fingertip devices, said with the file, and the app runs on")
+def _(t):
+    fifo = t.fifo("model.toml")
+    probe(t, SOURCE + HAPTICS + 'model = "' + str(fifo) + '"\n').expect(rc=0, err=r"no fingertip haptics.*model.toml.*FIFO")
+
+
+@case("29 a device model of /dev/zero, or a broken one: refused as a character device / with the file and line")
+def _(t):
+    probe(t, SOURCE + HAPTICS + 'model = "/dev/zero"\n').expect(rc=0, err=r"no fingertip haptics.*/dev/zero.*character device")
+    bad = t.write("bad_model.toml", 'kind = "platform_3dof"\n[limits\nmax_normal_n = \n')
+    probe(t, SOURCE + HAPTICS + 'model = "' + str(bad) + '"\n').expect(rc=0, err=r"no fingertip haptics.*bad_model.toml:\d+")

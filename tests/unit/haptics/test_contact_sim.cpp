@@ -507,3 +507,137 @@ TEST(ForceLaws, PlaneLawAndValidation) {
 
 }  // namespace
 }  // namespace proprio::haptics
+
+namespace proprio::haptics {
+
+namespace {
+
+// Two flat hands facing each other across a free box: palms along world x.
+struct TwoHandRig {
+  static constexpr double kBoxHalfX = 0.04;
+  // The right hand's palm (-Y) faces -x, the left's +x; fingers point -z.
+  static Pose wrist(Handedness side, double squeeze_m, double lift_m) {
+    const double s = side == Handedness::right ? 1.0 : -1.0;
+    Eigen::Matrix3d R;
+    R.col(0) = Vec3(0, s * -1.0, 0);
+    R.col(1) = Vec3(s, 0, 0);
+    R.col(2) = Vec3(0, 0, 1);
+    // The palm box's surface is ~9 mm below the wrist frame's origin (palm side).
+    return {Quat(R), Vec3(s * (kBoxHalfX + 0.009 - squeeze_m), 1.0 + lift_m, -0.25)};
+  }
+};
+
+}  // namespace
+
+// Issue 29: both proxies live in one world and hold the same object. Two
+// palms squeeze a 200 g box and lift it; the box only rises if both hands
+// press it (one palm alone pushes it sideways, it does not lift it).
+TEST(ContactSim, TwoHandsInOneWorldLiftABoxTogether) {
+  const HandModel model = test_hand();
+  const ProxyHandSpec hands[] = {{model, Handedness::left}, {model, Handedness::right}};
+  HapticScene scene = empty_scene();
+  SceneObject box = SceneObject::box("box", Vec3(TwoHandRig::kBoxHalfX, 0.05, 0.06),
+                                     Pose{Quat::Identity(), Vec3(0.0, 1.0, -0.30)});
+  box.fixed = false;
+  box.mass_kg = 0.2;
+  SceneObject table = SceneObject::box("table", Vec3(0.3, 0.02, 0.3), Pose{Quat::Identity(), Vec3(0.0, 0.93, -0.30)});
+  scene.objects = {table, box};
+  auto sim = ContactSimulation::create(hands, scene);
+  ASSERT_TRUE(sim) << sim.error().message;
+  ASSERT_EQ(sim->hand_count(), 2u);
+  EXPECT_EQ(sim->hand_index(Handedness::left), 0);
+  EXPECT_EQ(sim->hand_index(Handedness::right), 1);
+  EXPECT_NE(sim->mjcf().find("left_proxy_index_distal"), std::string::npos);
+  EXPECT_NE(sim->mjcf().find("right_target_wrist"), std::string::npos);
+
+  for (Handedness side : {Handedness::left, Handedness::right}) {
+    sim->reset_hand(TwoHandRig::wrist(side, -0.01, 0.0), HandAngles{}, static_cast<std::size_t>(sim->hand_index(side)));
+  }
+  // Settle on the table, then squeeze (1 cm into the box), then lift 10 cm over 1 s.
+  const double y0 = sim->object_pose("box")->p.y();
+  for (int i = 0; i < 1500; ++i) {
+    const double t = i * 1e-3;
+    const double squeeze = std::clamp((t - 0.2) / 0.3, 0.0, 1.0) * 0.01;
+    const double lift = std::clamp((t - 0.5) / 1.0, 0.0, 1.0) * 0.10;
+    for (Handedness side : {Handedness::left, Handedness::right}) {
+      sim->set_target(TwoHandRig::wrist(side, squeeze, lift), HandAngles{},
+                      static_cast<std::size_t>(sim->hand_index(side)));
+    }
+    sim->step();
+  }
+  const Pose lifted = *sim->object_pose("box");
+  std::printf("two hands lifted the box %.1f mm (hands rose 100 mm), box x %.1f mm, hands carry %.2f N\n",
+              (lifted.p.y() - y0) * 1e3, lifted.p.x() * 1e3, sim->hand_force_on_object("box").y());
+  EXPECT_GT(lifted.p.y() - y0, 0.07) << "the box rose with both hands";
+  EXPECT_LT(std::abs(lifted.p.x()), 0.01) << "squeezed evenly from both sides";
+  EXPECT_GT(sim->hand_force_on_object("box").y(), 1.5) << "the hands carry the box's weight (1.96 N)";
+  for (std::size_t h = 0; h < 2; ++h) {
+    EXPECT_GT((sim->proxy_wrist(h).p - TwoHandRig::wrist(sim->hand(h), 0.01, 0.10).p).norm(), 0.005)
+        << "each proxy is held back by the box, not where its tracked hand is";
+  }
+
+  // One hand alone cannot lift it: the same motion with the left hand away.
+  auto alone = ContactSimulation::create(hands, scene);
+  ASSERT_TRUE(alone);
+  alone->reset_hand(Pose{Quat::Identity(), Vec3(-0.5, 1.3, -0.3)}, HandAngles{}, 0);
+  alone->reset_hand(TwoHandRig::wrist(Handedness::right, -0.01, 0.0), HandAngles{}, 1);
+  for (int i = 0; i < 1500; ++i) {
+    const double t = i * 1e-3;
+    alone->set_target(Pose{Quat::Identity(), Vec3(-0.5, 1.3, -0.3)}, HandAngles{}, 0);
+    alone->set_target(TwoHandRig::wrist(Handedness::right, std::clamp((t - 0.2) / 0.3, 0.0, 1.0) * 0.01,
+                                        std::clamp((t - 0.5) / 1.0, 0.0, 1.0) * 0.10),
+                      HandAngles{}, 1);
+    alone->step();
+  }
+  std::printf("one hand alone moved the box up %.1f mm\n", (alone->object_pose("box")->p.y() - y0) * 1e3);
+  EXPECT_LT(alone->object_pose("box")->p.y() - y0, 0.03) << "one palm does not lift the box";
+}
+
+TEST(ContactSim, CollidersAreSetMovedAndRemovedAtRunTime) {
+  ContactSimOptions options;
+  options.collider_slots = 2;
+  auto sim = ContactSimulation::create(test_hand(), Handedness::right, empty_scene(), options);
+  ASSERT_TRUE(sim) << sim.error().message;
+  ASSERT_EQ(sim->collider_slot_count(), 2);
+  const HandAngles flat{};
+  const Pose T_world_wrist{Quat::Identity(), Vec3(0.0, 1.0, -0.3)};
+  sim->reset_hand(T_world_wrist, flat);
+  const Pose tip = sim->proxy_pose(0).joint(HandJoint::index_tip);
+  // A sphere pushed 5 mm into the pad (the pad faces the tip frame's -Y).
+  ColliderShape sphere;
+  sphere.shape = ShapeKind::sphere;
+  sphere.radius_m = 0.02;
+  const double pad_radius = 0.5 * test_hand().shape().fingers[1].joint_radius_m[4] +
+                            0.5 * test_hand().shape().fingers[1].joint_radius_m[3];
+  const Pose at{Quat::Identity(), tip.p + tip.q * Vec3(0, -(pad_radius + 0.02 - 0.005), 0.005)};
+  ASSERT_TRUE(sim->set_collider(0, sphere, at));
+  double pressed = 0.0;
+  for (int i = 0; i < 300; ++i) {
+    sim->set_target(T_world_wrist, flat);
+    sim->step();
+    pressed = std::max(pressed, sim->fingertip(Finger::index).on_pad.normal_n);
+  }
+  EXPECT_GT(pressed, 0.2) << "the collider presses the index pad";
+  EXPECT_GT((sim->proxy_pose(0).joint(HandJoint::index_tip).p - tip.p).norm(), 0.002) << "and pushes the proxy away";
+  sim->remove_collider(0);
+  for (int i = 0; i < 300; ++i) {
+    sim->set_target(T_world_wrist, flat);
+    sim->step();
+  }
+  EXPECT_LT(sim->fingertip(Finger::index).on_pad.normal_n, 1e-3) << "a removed collider touches nothing";
+  // Bad slots, poses and shapes are refused without touching the model.
+  EXPECT_FALSE(sim->set_collider(2, sphere, at));
+  EXPECT_FALSE(sim->set_collider(-1, sphere, at));
+  EXPECT_FALSE(sim->set_collider(0, sphere, Pose{Quat::Identity(), Vec3(NAN, 0, 0)}));
+  ColliderShape plate = sphere;
+  plate.shape = ShapeKind::plate_with_hole;
+  EXPECT_FALSE(sim->set_collider(0, plate, at));
+  EXPECT_FALSE(plate.validate().ok());
+  sphere.friction = 3.0;
+  EXPECT_FALSE(sphere.validate().ok());
+  ContactSimOptions too_many;
+  too_many.collider_slots = kMaxColliderSlots + 1;
+  EXPECT_FALSE(too_many.validate().ok());
+}
+
+}  // namespace proprio::haptics

@@ -322,5 +322,79 @@ TEST(ServoLoop, RejectsBadChannels) {
   EXPECT_FALSE(ServoLoop::create(make(), {}, o));
 }
 
+
+// Issue 29: one loop, both hands. Tracked hands go to their own proxy by side,
+// channels render their own hand's finger, and what an ExtraForces source adds
+// (an app's forces) reaches only its channel; switches act at the next tick.
+class PerChannelForces final : public ExtraForces {
+ public:
+  FingertipForce force(std::size_t channel, TimeNs) noexcept override {
+    FingertipForce f;
+    f.normal_n = channel == 0 ? 0.3 : 0.6;
+    return f;
+  }
+};
+
+TEST(ServoLoop, TwoHandsInOneLoop) {
+  const HandModel model(*HandShape::from_measurements(0.19, 0.09));
+  const ProxyHandSpec hands[] = {{model, Handedness::left}, {model, Handedness::right}};
+  HapticScene scene;
+  scene.floor_height_m.reset();
+  auto sim = ContactSimulation::create(hands, scene);
+  ASSERT_TRUE(sim) << sim.error().message;
+  auto left_sink = std::make_shared<RecordingSink>(), right_sink = std::make_shared<RecordingSink>();
+  std::vector<ServoChannel> channels;
+  channels.push_back({Finger::index, force_vector_device(), left_sink, 0});
+  channels.push_back({Finger::index, force_vector_device(), right_sink, 1});
+  ServoLoopOptions options;
+  options.force_scale = 5.0;  // contact only: the extra forces stay as asked
+  auto loop = ServoLoop::create(std::move(*sim), channels, options);
+  ASSERT_TRUE(loop) << loop.error().message;
+  (*loop)->set_extra_forces(std::make_shared<PerChannelForces>());
+
+  const Pose left_at{Quat::Identity(), Vec3(-0.3, 1.1, -0.3)}, right_at{Quat::Identity(), Vec3(0.3, 1.1, -0.3)};
+  TimeNs now = kNsPerSecond;
+  (*loop)->engage(now);
+  for (int i = 0; i < 700; ++i, now += kNsPerMillisecond) {  // past the 0.4 s ramp-in
+    (*loop)->submit_tracked_hand(model.forward(Handedness::left, HandAngles{}, left_at, now));
+    (*loop)->submit_tracked_hand(model.forward(Handedness::right, HandAngles{}, right_at, now));
+    (*loop)->tick(now);
+  }
+  const ServoSnapshot* snap = (*loop)->latest();
+  ASSERT_NE(snap, nullptr);
+  ASSERT_EQ(snap->hand_count, 2u);
+  EXPECT_EQ(snap->hands[0].side, Handedness::left);
+  EXPECT_LT((snap->hands[0].proxy.joint(HandJoint::wrist).p - left_at.p).norm(), 0.005) << "the left proxy follows the left hand";
+  EXPECT_LT((snap->hands[1].proxy.joint(HandJoint::wrist).p - right_at.p).norm(), 0.005);
+  EXPECT_NEAR(left_sink->measured().normal_n, 0.3, 1e-9);
+  EXPECT_NEAR(right_sink->measured().normal_n, 0.6, 1e-9);
+  EXPECT_EQ(snap->channels[1].hand, 1u);
+
+  // Output off: zero at the next tick; on: ramps in from zero again.
+  (*loop)->request_output(false);
+  (*loop)->tick(now += kNsPerMillisecond);
+  EXPECT_FALSE(right_sink->last_enabled());
+  EXPECT_EQ(right_sink->measured().normal_n, 0.0);
+  (*loop)->request_output(true);
+  (*loop)->tick(now += kNsPerMillisecond);
+  EXPECT_TRUE(right_sink->last_enabled());
+  EXPECT_LT(right_sink->measured().normal_n, 0.05) << "ramping in";
+  (*loop)->set_simulation_enabled(false);
+  (*loop)->tick(now += kNsPerMillisecond);
+  EXPECT_FALSE((*loop)->latest()->simulating);
+  const std::uint64_t steps = (*loop)->simulation().stats().steps;
+  (*loop)->tick(now += kNsPerMillisecond);
+  EXPECT_EQ((*loop)->simulation().stats().steps, steps) << "no MuJoCo step while the simulation is off";
+
+  // A side the world lacks, a hand index past it, a second channel on one finger: refused.
+  auto one = ContactSimulation::create(model, Handedness::right, scene);
+  ASSERT_TRUE(one);
+  auto wrong = channels;
+  EXPECT_FALSE(ServoLoop::create(std::move(*one), wrong, options)) << "channel on hand 1 of a one-hand world";
+  auto two = ContactSimulation::create(hands, scene);
+  ASSERT_TRUE(two);
+  wrong[0].hand = 1;
+  EXPECT_FALSE(ServoLoop::create(std::move(*two), wrong, options)) << "two channels on the right index";
+}
 }  // namespace
 }  // namespace proprio::haptics

@@ -255,11 +255,14 @@ XrReferenceSpaceType to_xr(ReferenceSpace s) {
   return XR_REFERENCE_SPACE_TYPE_LOCAL;
 }
 
-// Loads the layer config. A failure is logged and leaves the instance
-// without sources or haptics: the app then sees no hand tracking.
-bool load_config(Instance& inst) {
+// Loads the layer config. A failure leaves the instance without sources or
+// haptics: the app then sees no hand tracking. It is logged for an app that
+// asked for what the config provides (quiet: an app that only might get its
+// vibrations mapped, and must not see the layer at all otherwise).
+bool load_config(Instance& inst, bool quiet) {
   const auto path = default_layer_config_path();
   auto cfg = load_layer_config(path);
+  if (!cfg && quiet) return false;
   if (!cfg) {
     logger().error("Proprio layer: {}. Proprio serves no hands (a runtime's own hand tracking, "
                    "if any, passes through). Write a config with 'proprio layer init-config'.",
@@ -1881,7 +1884,8 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_api_layer_instance(const XrInstanceC
     // that tracks no hands (its vibrations can still reach the fingertips).
     // Sources start only for hand tracking or the fingertip extension (the
     // contact simulation follows the tracked hands).
-    if (load_config(*inst) && (inst->hand_tracking || inst->fingertip)) start_sources(*inst);
+    const bool asked = inst->hand_tracking || inst->fingertip;
+    if (load_config(*inst, !asked) && asked) start_sources(*inst);
     const RuntimeHandTracking mode = inst->config.runtime_hand_tracking;
     inst->serving = inst->hand_tracking && (mode == RuntimeHandTracking::override_it ||
                                             (mode == RuntimeHandTracking::automatic && !inst->sources.empty()));

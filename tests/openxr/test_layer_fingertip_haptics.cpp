@@ -379,4 +379,77 @@ TEST_F(LayerFingertipHaptics, FuzzedForcesNeverExceedTheDeviceLimits) {
   EXPECT_EQ(app.get_state(h, XR_HAND_RIGHT_EXT, &st), XR_ERROR_HANDLE_INVALID);
 }
 
+
+// An app's vibrations on a hand path press that hand's fingertips (and still
+// reach the runtime); the extension is used here only to read the devices.
+TEST_F(LayerFingertipHaptics, VibrationOnAHandPathPressesThatHandsFingertips) {
+  use_config(kConfig);
+  App app;
+  XrSystemFingertipHapticsPropertiesPROPRIO props{};
+  ASSERT_NO_FATAL_FAILURE(app.start(&props));
+  auto info = xr_struct<XrFingertipHapticsCreateInfoPROPRIO>(XR_TYPE_FINGERTIP_HAPTICS_CREATE_INFO_PROPRIO);
+  XrFingertipHapticsPROPRIO h = XR_NULL_HANDLE;
+  ASSERT_EQ(app.create(app.session, &info, &h), XR_SUCCESS);
+
+  XrPath hands[2];
+  ASSERT_EQ(xrStringToPath(app.instance, "/user/hand/left", &hands[0]), XR_SUCCESS);
+  ASSERT_EQ(xrStringToPath(app.instance, "/user/hand/right", &hands[1]), XR_SUCCESS);
+  auto set_info = xr_struct<XrActionSetCreateInfo>(XR_TYPE_ACTION_SET_CREATE_INFO);
+  std::strcpy(set_info.actionSetName, "app");
+  std::strcpy(set_info.localizedActionSetName, "app");
+  XrActionSet set = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateActionSet(app.instance, &set_info, &set), XR_SUCCESS);
+  auto action_info = xr_struct<XrActionCreateInfo>(XR_TYPE_ACTION_CREATE_INFO);
+  std::strcpy(action_info.actionName, "buzz");
+  std::strcpy(action_info.localizedActionName, "buzz");
+  action_info.actionType = XR_ACTION_TYPE_VIBRATION_OUTPUT;
+  action_info.countSubactionPaths = 2;
+  action_info.subactionPaths = hands;
+  XrAction buzz = XR_NULL_HANDLE;
+  ASSERT_EQ(xrCreateAction(set, &action_info, &buzz), XR_SUCCESS);
+  XrPath profile, outputs[2];
+  ASSERT_EQ(xrStringToPath(app.instance, "/interaction_profiles/khr/simple_controller", &profile), XR_SUCCESS);
+  ASSERT_EQ(xrStringToPath(app.instance, "/user/hand/left/output/haptic", &outputs[0]), XR_SUCCESS);
+  ASSERT_EQ(xrStringToPath(app.instance, "/user/hand/right/output/haptic", &outputs[1]), XR_SUCCESS);
+  const XrActionSuggestedBinding bindings[] = {{buzz, outputs[0]}, {buzz, outputs[1]}};
+  auto suggest = xr_struct<XrInteractionProfileSuggestedBinding>(XR_TYPE_INTERACTION_PROFILE_SUGGESTED_BINDING);
+  suggest.interactionProfile = profile;
+  suggest.countSuggestedBindings = 2;
+  suggest.suggestedBindings = bindings;
+  ASSERT_EQ(xrSuggestInteractionProfileBindings(app.instance, &suggest), XR_SUCCESS);
+  auto attach = xr_struct<XrSessionActionSetsAttachInfo>(XR_TYPE_SESSION_ACTION_SETS_ATTACH_INFO);
+  attach.countActionSets = 1;
+  attach.actionSets = &set;
+  ASSERT_EQ(xrAttachSessionActionSets(app.session, &attach), XR_SUCCESS);
+  const XrActiveActionSet active{set, XR_NULL_PATH};
+  auto sync = xr_struct<XrActionsSyncInfo>(XR_TYPE_ACTIONS_SYNC_INFO);
+  sync.countActiveActionSets = 1;
+  sync.activeActionSets = &active;
+  for (int i = 0; i < 5; ++i) {
+    app.frame();
+    EXPECT_TRUE(XR_SUCCEEDED(xrSyncActions(app.session, &sync)));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(450));  // the gates' ramp-in after focus
+
+  auto haptic = xr_struct<XrHapticActionInfo>(XR_TYPE_HAPTIC_ACTION_INFO);
+  haptic.action = buzz;
+  haptic.subactionPath = hands[1];
+  auto vibration = xr_struct<XrHapticVibration>(XR_TYPE_HAPTIC_VIBRATION);
+  vibration.amplitude = 1.0f;
+  vibration.duration = 2 * kNsPerSecond;
+  vibration.frequency = XR_FREQUENCY_UNSPECIFIED;
+  ASSERT_EQ(xrApplyHapticFeedback(app.session, &haptic, reinterpret_cast<const XrHapticBaseHeader*>(&vibration)),
+            XR_SUCCESS);
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  const auto right = app.read(h, XR_HAND_RIGHT_EXT), left = app.read(h, XR_HAND_LEFT_EXT);
+  for (std::size_t f = 0; f <= XR_FINGERTIP_MIDDLE_PROPRIO; ++f) {
+    // amplitude 1 x vibration_gain 0.5 x 1.5 N
+    EXPECT_NEAR(right.fingers[f].commandedForce.y, 0.75, 0.01) << "right finger " << f;
+    EXPECT_EQ(left.fingers[f].commandedForce.y, 0.0f) << "left finger " << f;
+  }
+  ASSERT_EQ(xrStopHapticFeedback(app.session, &haptic), XR_SUCCESS);
+  std::this_thread::sleep_for(std::chrono::milliseconds(60));  // 0.75 N down at 50 N/s: 15 ms
+  EXPECT_EQ(app.read(h, XR_HAND_RIGHT_EXT).fingers[XR_FINGERTIP_INDEX_PROPRIO].commandedForce.y, 0.0f);
+}
+
 }  // namespace layer_fingertip_test

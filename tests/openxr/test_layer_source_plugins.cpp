@@ -128,7 +128,8 @@ class LayerSourcePlugins : public ::testing::Test {
     EXPECT_TRUE(r.maps("libXrApiLayer_proprio_hand_tracking.so")) << "the layer was not loaded\n" << r.describe();
     EXPECT_FALSE(r.maps("libopencv_")) << r.describe();
     EXPECT_FALSE(r.maps("libhidapi")) << r.describe();
-    EXPECT_FALSE(r.maps("libproprio_source_")) << r.describe();  // ftm, glove and vist alike
+    EXPECT_FALSE(r.maps("libproprio_source_")) << r.describe();  // ftm, glove, vist and haptics alike
+    EXPECT_FALSE(r.maps("libmujoco")) << r.describe();
   }
 
   TempDir dir_;
@@ -165,6 +166,20 @@ TEST_F(LayerSourcePlugins, AGloveSourceLoadsTheStretchGlovePluginAndOpenCv) {
   EXPECT_TRUE(r.maps("libopencv_dnn")) << r.describe();
   EXPECT_FALSE(r.maps("libproprio_source_vist.so")) << r.describe();
   EXPECT_FALSE(r.maps("libproprio_source_ftm.so")) << r.describe();
+}
+
+// Fingertip devices (issue 29): a [haptics] table brings the haptics plugin
+// and MuJoCo into an app's session (its vibrations reach the fingertips even
+// though it never heard of Proprio), and still no OpenCV.
+TEST_F(LayerSourcePlugins, AHapticsTableLoadsTheHapticsPluginAndMujoco) {
+  const auto r = run("[[source]]\ntype = \"sim\"\nspace = \"local\"\n[haptics]\ndevices = \"emulated\"\n"
+                     "right = [\"index\"]\n");
+  ASSERT_EQ(r.status, 0) << r.describe();
+  expect_both_active(r);
+  EXPECT_TRUE(r.maps("/libproprio_source_haptics.so")) << r.describe();
+  EXPECT_TRUE(r.maps("libmujoco")) << r.describe();
+  EXPECT_FALSE(r.maps("libopencv_")) << r.describe();
+  EXPECT_FALSE(r.maps("libproprio_source_vist.so")) << r.describe();
 }
 
 // The FTM glove's plugin maps only what the glove needs: hidapi for its board,

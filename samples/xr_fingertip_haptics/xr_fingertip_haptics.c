@@ -409,8 +409,12 @@ static bool create_haptics(App* app) {
   XrFingertipHapticsCreateInfoPROPRIO info = {.type = XR_TYPE_FINGERTIP_HAPTICS_CREATE_INFO_PROPRIO};
   info.contactSimulation = app->has_contact_simulation ? XR_TRUE : XR_FALSE;
   info.worldSpace = app->local;
+  const double t0 = now_s();
   XR_CHECK(app, app->xrCreateFingertipHapticsPROPRIO(app->session, &info, &app->haptics),
            "xrCreateFingertipHapticsPROPRIO");
+  /* With the contact simulation the layer builds the world for the tracked hands' sizes: a start-up cost. */
+  printf("xrCreateFingertipHapticsPROPRIO (contact simulation %s) took %.1f ms\n",
+         app->has_contact_simulation ? "on" : "off", (now_s() - t0) * 1e3);
   printf("fingertip devices:\n");
   for (int h = 0; h < 2; ++h) {
     const XrHandEXT hand = h == 0 ? XR_HAND_LEFT_EXT : XR_HAND_RIGHT_EXT;

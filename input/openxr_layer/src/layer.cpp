@@ -159,6 +159,7 @@ struct Session {
   // app's XrFingertipHapticsPROPRIO (one per session).
   std::unique_ptr<FingertipHapticsService> haptics;
   XrFingertipHapticsPROPRIO haptics_handle = XR_NULL_HANDLE;
+  std::atomic<bool> haptics_creating{false};
 };
 constexpr std::uint32_t kAttachAloneAfterFrames = 90;
 
@@ -1373,25 +1374,40 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_fingertip_haptics(XrSession session,
                                                               XrFingertipHapticsPROPRIO* out) {
   return guarded("xrCreateFingertipHapticsPROPRIO", [&] {
     auto& r = registry();
-    std::unique_lock lock(r.mutex);
-    auto it = r.sessions.find(session);
-    if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
-    Session& s = *it->second;
-    Instance& inst = *s.instance;
-    if (!info || info->type != XR_TYPE_FINGERTIP_HAPTICS_CREATE_INFO_PROPRIO || !out) return XR_ERROR_VALIDATION_FAILURE;
-    if (info->contactSimulation != XR_FALSE && info->contactSimulation != XR_TRUE) return XR_ERROR_VALIDATION_FAILURE;
-    const bool contact = info->contactSimulation == XR_TRUE;
-    if (contact && info->worldSpace == XR_NULL_HANDLE) return XR_ERROR_HANDLE_INVALID;
-    if (!s.haptics) return XR_ERROR_FEATURE_UNSUPPORTED;  // supportsFingertipHaptics was false
-    if (contact && !s.haptics->contact_allowed()) return XR_ERROR_FEATURE_UNSUPPORTED;
-    if (s.haptics_handle != XR_NULL_HANDLE) return XR_ERROR_LIMIT_REACHED;  // one per session: the devices are one set
-
     auto hh = std::make_unique<HapticsHandle>();
-    hh->instance = &inst;
-    hh->session = &s;
-    hh->service = s.haptics.get();
-    hh->contact = contact;
-    hh->world_space = contact ? info->worldSpace : XR_NULL_HANDLE;
+    {
+      std::shared_lock lock(r.mutex);
+      auto it = r.sessions.find(session);
+      if (it == r.sessions.end()) return XR_ERROR_HANDLE_INVALID;
+      Session& s = *it->second;
+      if (!info || info->type != XR_TYPE_FINGERTIP_HAPTICS_CREATE_INFO_PROPRIO || !out) return XR_ERROR_VALIDATION_FAILURE;
+      if (info->contactSimulation != XR_FALSE && info->contactSimulation != XR_TRUE) return XR_ERROR_VALIDATION_FAILURE;
+      hh->contact = info->contactSimulation == XR_TRUE;
+      if (hh->contact && info->worldSpace == XR_NULL_HANDLE) return XR_ERROR_HANDLE_INVALID;
+      if (!s.haptics) return XR_ERROR_FEATURE_UNSUPPORTED;  // supportsFingertipHaptics was false
+      if (hh->contact && !s.haptics->contact_allowed()) return XR_ERROR_FEATURE_UNSUPPORTED;
+      // One per session: the devices are one set. The flag also keeps two
+      // threads from creating at once while the lock is released below.
+      if (s.haptics_handle != XR_NULL_HANDLE || s.haptics_creating.exchange(true)) return XR_ERROR_LIMIT_REACHED;
+      hh->instance = s.instance;
+      hh->session = &s;
+      hh->service = s.haptics.get();
+    }
+    // No registry lock from here to the insertion: starting the simulation
+    // builds a MuJoCo world (about 0.1 s), and other threads keep locating
+    // hands meanwhile. The session outlives the call: an app may not destroy
+    // it while creating its children (OpenXR's external synchronization).
+    Session& s = *hh->session;
+    Instance& inst = *hh->instance;
+    const auto fail = [&](XrResult code) {
+      for (XrSpace& sp : hh->source_space) {
+        if (sp != XR_NULL_HANDLE) inst.next.destroy_space(sp);
+        sp = XR_NULL_HANDLE;
+      }
+      s.haptics_creating.store(false);
+      return code;
+    };
+    hh->world_space = hh->contact ? info->worldSpace : XR_NULL_HANDLE;
     for (std::size_t h = 0; h < 2; ++h) {
       const HandBinding& b = inst.hands[h];
       if (!b.source) continue;
@@ -1406,7 +1422,7 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_fingertip_haptics(XrSession session,
       hh->source_space[h] = make_reference_space(inst, session, to_xr(b.config->space), b.config->T_space_source,
                                                  "fingertip haptics source origin");
     }
-    if (contact) {
+    if (hh->contact) {
       // Where the sources are now, so that the proxies can take the tracked
       // hands' sizes at once (the app's own calls keep it current).
       const TimeNs now = MonotonicClock::instance().now_ns();
@@ -1415,17 +1431,22 @@ XRAPI_ATTR XrResult XRAPI_CALL layer_create_fingertip_haptics(XrSession session,
         timespec ts{static_cast<time_t>(now / kNsPerSecond), static_cast<long>(now % kNsPerSecond)};
         if (XR_FAILED(inst.next.convert_timespec_to_time(inst.handle, &ts, &xr_now))) xr_now = now;
       }
+      if (const XrSpace any = hh->source_space[0] ? hh->source_space[0] : hh->source_space[1]; any != XR_NULL_HANDLE) {
+        Pose probe;
+        XrResult located = XR_SUCCESS;
+        locate_pose(inst, any, hh->world_space, xr_now, probe, &located);
+        if (located == XR_ERROR_HANDLE_INVALID) return fail(XR_ERROR_HANDLE_INVALID);  // not a space of this session
+      }
       hh->relocate(xr_now);
       if (auto st = s.haptics->start_contact(hh.get()); !st) {
         logger().error("Proprio layer: fingertip haptics: {}", st.error().message);
-        for (XrSpace sp : hh->source_space) {
-          if (sp != XR_NULL_HANDLE) inst.next.destroy_space(sp);
-        }
-        return XR_ERROR_RUNTIME_FAILURE;
+        return fail(XR_ERROR_RUNTIME_FAILURE);
       }
     }
+    std::unique_lock lock(r.mutex);
     const auto handle = reinterpret_cast<XrFingertipHapticsPROPRIO>(hh.get());
     s.haptics_handle = handle;
+    s.haptics_creating.store(false);
     haptics_handles()[handle] = std::move(hh);
     *out = handle;
     return XR_SUCCESS;

@@ -151,6 +151,7 @@ class HapticsService final : public FingertipHapticsService, public haptics::Ext
   }
 
   void set_output(bool on) noexcept override {
+    std::lock_guard lock(app_mutex_);  // fit_proxies may be replacing the loop
     output_on_.store(on, std::memory_order_release);
     loop_->request_output(on);
   }
@@ -411,6 +412,9 @@ class HapticsService final : public FingertipHapticsService, public haptics::Ext
       old = *shape;
     }
     if (!changed) return;
+    // App threads keep calling in meanwhile (the layer holds no lock of its
+    // own over this); they wait here for the new loop.
+    std::scoped_lock lock(app_mutex_, read_mutex_);
     loop_->stop();
     const std::array<HandShape, 2> previous = shapes_;
     shapes_ = fitted;
@@ -421,6 +425,7 @@ class HapticsService final : public FingertipHapticsService, public haptics::Ext
       st = build_loop();
     }
     if (st) st = loop_->start();
+    loop_->publish_colliders(colliders_);
     if (!st) logger().error("Proprio layer: fingertip haptics: the servo loop did not restart: {}", st.error().message);
     for (std::size_t h = 0; h < 2; ++h) {
       logger().info("Proprio layer: fingertip haptics: {} proxy: {}", to_string(static_cast<Handedness>(h)),

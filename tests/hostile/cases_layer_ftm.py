@@ -2,26 +2,17 @@
 config with the file and the allowed choices; a hostile calibration file
 named by an ftm source fails that source, named, and the app runs on
 (docs/openxr-layer.md)."""
-from pathlib import Path
 
 from hostile import case
 
-LAYER = "XR_APILAYER_PROPRIO_hand_tracking"
 
 
 def ftm_status(t, config):
-    return t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))})
+    return t.layer_status(config)
 
 
 def ftm_probe(t, config):
-    t.need(bool(t.opts.mock_runtime_json) and Path(t.opts.mock_runtime_json).exists(),
-           "no mock OpenXR runtime manifest (--mock-runtime-json)")
-    t.need(bool(t.opts.layer_dir) and Path(t.opts.layer_dir).is_dir(), "no built layer (--layer-dir)")
-    env = {"XR_RUNTIME_JSON": str(Path(t.opts.mock_runtime_json).resolve()),
-           "XR_API_LAYER_PATH": str(Path(t.opts.layer_dir).resolve()),
-           "XR_ENABLE_API_LAYERS": LAYER,
-           "PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))}
-    return t.run("xr-probe", "--seconds", "1", "--hand", "right", "--space", "local", env=env, timeout=90)
+    return t.run("xr-probe", "--seconds", "1", "--hand", "right", "--space", "local", env=t.layer_env(config), timeout=90)
 
 
 FTM_NO_HANDS = {2, 3}

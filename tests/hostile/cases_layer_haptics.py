@@ -2,28 +2,19 @@
 stops the config with the file and what is allowed; a hostile device model
 named by it costs the app its fingertip devices, said in the log, and the app
 runs on without a hang (docs/xr-proprio-fingertip-haptics.md)."""
-from pathlib import Path
 
 from hostile import case
 
-LAYER = "XR_APILAYER_PROPRIO_hand_tracking"
 SOURCE = '[[source]]\ntype = "sim"\nspace = "local"\n'
 HAPTICS = '[haptics]\ndevices = "emulated"\nright = ["index"]\n'
 
 
 def status(t, config):
-    return t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))})
+    return t.layer_status(config)
 
 
 def probe(t, config):
-    t.need(bool(t.opts.mock_runtime_json) and Path(t.opts.mock_runtime_json).exists(),
-           "no mock OpenXR runtime manifest (--mock-runtime-json)")
-    t.need(bool(t.opts.layer_dir) and Path(t.opts.layer_dir).is_dir(), "no built layer (--layer-dir)")
-    env = {"XR_RUNTIME_JSON": str(Path(t.opts.mock_runtime_json).resolve()),
-           "XR_API_LAYER_PATH": str(Path(t.opts.layer_dir).resolve()),
-           "XR_ENABLE_API_LAYERS": LAYER,
-           "PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))}
-    return t.run("xr-probe", "--seconds", "1", "--hand", "right", "--space", "local", env=env, timeout=90)
+    return t.run("xr-probe", "--seconds", "1", "--hand", "right", "--space", "local", env=t.layer_env(config), timeout=90)
 
 
 @case("29 [haptics] with an unknown finger, a finger twice, or no fingers: refused, the finger or the fix named")

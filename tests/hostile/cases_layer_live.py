@@ -4,27 +4,17 @@ tracker roles), live and emulated VIST inputs, emulated gloves' truth files.
 A bad value stops the config with the file, line and the allowed choices; a
 hostile file named by a source fails that source, named, and the app runs on
 (docs/openxr-layer.md)."""
-from pathlib import Path
 
 from hostile import case
 
-LAYER = "XR_APILAYER_PROPRIO_hand_tracking"
 
 
 def status(t, config):
-    return t.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))})
+    return t.layer_status(config)
 
 
 def xr_env(t, config, extra=None):
-    t.need(bool(t.opts.mock_runtime_json) and Path(t.opts.mock_runtime_json).exists(),
-           "no mock OpenXR runtime manifest (--mock-runtime-json)")
-    t.need(bool(t.opts.layer_dir) and Path(t.opts.layer_dir).is_dir(), "no built layer (--layer-dir)")
-    env = {"XR_RUNTIME_JSON": str(Path(t.opts.mock_runtime_json).resolve()),
-           "XR_API_LAYER_PATH": str(Path(t.opts.layer_dir).resolve()),
-           "XR_ENABLE_API_LAYERS": LAYER,
-           "PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config))}
-    env.update(extra or {})
-    return env
+    return t.layer_env(config, extra)
 
 
 def probe(t, config, extra=None, seconds="1"):

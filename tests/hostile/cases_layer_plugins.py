@@ -8,7 +8,6 @@ from pathlib import Path
 
 from hostile import case
 
-LAYER = "XR_APILAYER_PROPRIO_hand_tracking"
 PLUGIN = "libproprio_source_stretch_glove.so"
 
 GLOVE_CONFIG = """[layer]
@@ -29,14 +28,7 @@ space = "local"
 
 
 def xr_env(t, config, plugin_dir):
-    t.need(bool(t.opts.mock_runtime_json) and Path(t.opts.mock_runtime_json).exists(),
-           "no mock OpenXR runtime manifest (--mock-runtime-json)")
-    t.need(bool(t.opts.layer_dir) and Path(t.opts.layer_dir).is_dir(), "no built layer (--layer-dir)")
-    return {"XR_RUNTIME_JSON": str(Path(t.opts.mock_runtime_json).resolve()),
-            "XR_API_LAYER_PATH": str(Path(t.opts.layer_dir).resolve()),
-            "XR_ENABLE_API_LAYERS": LAYER,
-            "PROPRIO_LAYER_CONFIG": str(t.write("layer.toml", config)),
-            "PROPRIO_PLUGIN_DIR": str(plugin_dir)}
+    return t.layer_env(config, {"PROPRIO_PLUGIN_DIR": str(plugin_dir)})
 
 
 def probe(t, config, plugin_dir):

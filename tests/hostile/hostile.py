@@ -132,6 +132,24 @@ class Ctx:
         if not cond:
             raise Skip(why)
 
+    def layer_status(self, config: str) -> "Run":
+        """`proprio layer status` on this layer configuration (TOML text)."""
+        return self.run("layer", "status", env={"PROPRIO_LAYER_CONFIG": str(self.write("layer.toml", config))})
+
+    def layer_env(self, config: str | Path, extra: dict[str, str] | None = None) -> dict[str, str]:
+        """An app's environment: the mock runtime, Proprio's layer enabled, and this layer configuration (TOML
+        text, or a path used as it is). Skips the case when the runtime or the layer was not built."""
+        self.need(bool(self.opts.mock_runtime_json) and Path(self.opts.mock_runtime_json).exists(),
+                  "no mock OpenXR runtime manifest (--mock-runtime-json)")
+        self.need(bool(self.opts.layer_dir) and Path(self.opts.layer_dir).is_dir(), "no built layer (--layer-dir)")
+        path = config if isinstance(config, Path) else self.write("layer.toml", config)
+        env = {"XR_RUNTIME_JSON": str(Path(self.opts.mock_runtime_json).resolve()),
+               "XR_API_LAYER_PATH": str(Path(self.opts.layer_dir).resolve()),
+               "XR_ENABLE_API_LAYERS": "XR_APILAYER_PROPRIO_hand_tracking",
+               "PROPRIO_LAYER_CONFIG": str(path)}
+        env.update(extra or {})
+        return env
+
     def run(self, *args: str | Path, env: dict[str, str] | None = None, timeout: float = 60.0,
             max_mb: int = 2048, stdin: bytes | None = None, cli: bool = True) -> Run:
         """Runs the CLI (or, with cli=False, any program) in the case folder, with

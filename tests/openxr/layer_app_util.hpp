@@ -22,6 +22,18 @@
 
 namespace layer_test {
 
+// A test of an app on Debian's loader and the mock runtime with this build's
+// layer, and a layer configuration written per test.
+class LayerAppTest : public ::testing::Test {
+ protected:
+  void SetUp() override { use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR); }
+  void TearDown() override { ::unsetenv("PROPRIO_LAYER_CONFIG"); }
+  void use_config(const std::string& text) {
+    ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);
+  }
+  TempDir dir_;
+};
+
 struct Sample {
   TimeNs t_ns = 0;
   std::array<Pose, kHandJointCount> T_local_joint;

@@ -20,7 +20,7 @@
 #include <thread>
 #include <vector>
 
-#include "layer_test_util.hpp"
+#include "layer_app_util.hpp"
 #include "mock_motion.hpp"
 #include "proprio/core/xr_ext.hpp"
 #include "proprio/core/xr_interop.hpp"
@@ -153,17 +153,7 @@ struct App {
   }
 };
 
-class LayerFingertipHaptics : public ::testing::Test {
- protected:
-  void SetUp() override {
-    layer_test::use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR);
-  }
-  void TearDown() override { ::unsetenv("PROPRIO_LAYER_CONFIG"); }
-  void use_config(const std::string& text) {
-    ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);
-  }
-  layer_test::TempDir dir_;
-};
+class LayerFingertipHaptics : public layer_test::LayerAppTest {};
 
 TimeNs mono(XrTime t) { return mx::monotonic_ns_from_xr_time(t); }
 

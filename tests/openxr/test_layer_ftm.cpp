@@ -58,17 +58,7 @@ std::string ftm_describe(const std::vector<FtmGap>& gaps) {
   return out.empty() ? "none" : out;
 }
 
-class LayerFtm : public ::testing::Test {
- protected:
-  void SetUp() override {
-    layer_test::use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR);
-  }
-  void TearDown() override { ::unsetenv("PROPRIO_LAYER_CONFIG"); }
-  void use_config(const std::string& text) {
-    ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);
-  }
-  layer_test::TempDir dir_;
-};
+class LayerFtm : public layer_test::LayerAppTest {};
 
 TEST_F(LayerFtm, AnEmulatedFtmBoardOnATrackedWrist) {
   const auto truth_file = dir_.path() / "ftm_truth.csv";

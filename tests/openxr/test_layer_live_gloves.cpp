@@ -26,16 +26,7 @@ using layer_test::inactive_after_start;
 using layer_test::run_app;
 using layer_test::Sample;
 
-class LayerLiveGloves : public ::testing::Test {
- protected:
-  void SetUp() override {
-    layer_test::use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR);
-  }
-  void use_config(const std::string& text) {
-    ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);
-  }
-  layer_test::TempDir dir_;
-};
+class LayerLiveGloves : public layer_test::LayerAppTest {};
 
 TEST_F(LayerLiveGloves, AnEmulatedStretchGloveOnATrackedWrist) {
   const auto truth_file = dir_.path() / "truth.csv";

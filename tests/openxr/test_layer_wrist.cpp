@@ -9,7 +9,7 @@
 #include <cstring>
 #include <thread>
 
-#include "layer_test_util.hpp"
+#include "layer_app_util.hpp"
 #include "mock_motion.hpp"
 #include "proprio/core/xr_ext.hpp"
 #include "proprio/core/xr_interop.hpp"
@@ -205,16 +205,12 @@ void expect_hand_on_wrist(const WristJoints& out, Handedness hand, const Pose& T
   }
 }
 
-class LayerWrist : public ::testing::Test {
+class LayerWrist : public layer_test::LayerAppTest {
  protected:
   void SetUp() override {
-    layer_test::use_mock_runtime_with_layer(dir_.path(), PROPRIO_MOCK_RUNTIME_JSON, PROPRIO_LAYER_MANIFEST_DIR);
+    LayerAppTest::SetUp();
     recording_ = layer_test::write_still_recording(dir_.path(), 60 * kNsPerSecond).string();
   }
-  void use_config(const std::string& text) {
-    ::setenv("PROPRIO_LAYER_CONFIG", dir_.write("layer.toml", text).c_str(), 1);
-  }
-  TempDir dir_;
   std::string recording_;
 };
 

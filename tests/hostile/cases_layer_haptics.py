@@ -48,3 +48,26 @@ def _(t):
     probe(t, SOURCE + HAPTICS + 'model = "/dev/zero"\n').expect(rc=0, err=r"no fingertip haptics.*/dev/zero.*character device")
     bad = t.write("bad_model.toml", 'kind = "platform_3dof"\n[limits\nmax_normal_n = \n')
     probe(t, SOURCE + HAPTICS + 'model = "' + str(bad) + '"\n').expect(rc=0, err=r"no fingertip haptics.*bad_model.toml:\d+")
+
+
+def haptics_probe(t, config):
+    return t.run("xr-probe", "--haptics", env=t.layer_env(config), timeout=90)
+
+
+@case("29 xr-probe --haptics without a [haptics] table: exit 2, the table named")
+def _(t):
+    haptics_probe(t, SOURCE).expect(rc=2, err=r"no fingertip devices.*\[haptics\] table")
+
+
+@case("29 xr-probe --haptics whose device model is a FIFO: exit 1, the layer's reason in its log")
+def _(t):
+    fifo = t.fifo("model.toml")
+    haptics_probe(t, SOURCE + HAPTICS + 'model = "' + str(fifo) + '"\n').expect(
+        rc=1, err=r"model.toml.*FIFO(.|\n)*xrCreateFingertipHapticsPROPRIO: XR_ERROR_FEATURE_UNSUPPORTED")
+
+
+@case("29 xr-probe --haptics without Proprio's layer: exit 2, how to enable it")
+def _(t):
+    env = t.layer_env(SOURCE + HAPTICS)
+    env["XR_ENABLE_API_LAYERS"] = ""
+    t.run("xr-probe", "--haptics", env=env, timeout=90).expect(rc=2, err=r"XR_PROPRIO_fingertip_haptics is not offered")

@@ -6,6 +6,8 @@
 #include <memory>
 #include <string>
 
+#include <fmt/format.h>
+
 #include "commands.hpp"
 #include "proprio/core/log.hpp"
 #include "xr_loader_paths.hpp"
@@ -21,7 +23,7 @@ namespace {
 constexpr int kExitOk = 0;
 constexpr int kExitError = 1;
 constexpr int kExitNoHandTracking = 2;
-constexpr int kExitNeverActive = 3;
+constexpr int kExitNeverActive = 3;  // --haptics: a finger failed its press
 
 struct ProbeArgs {
   double seconds = 5.0;
@@ -30,6 +32,7 @@ struct ProbeArgs {
   std::string session = "auto";  // auto | headless | vulkan
   bool enable_layer = false;
   bool data_source = false;
+  bool haptics = false;
 };
 
 #ifdef PROPRIO_HAVE_ENGINE
@@ -51,7 +54,7 @@ struct ProbePrinter {
   }
   void operator()(const engine::XrProbeSystem& s) const {
     std::printf("System: %s (vendor %u)\n", s.name.c_str(), s.vendor_id);
-    std::printf("supportsHandTracking: %s\n", s.supports_hand_tracking ? "true" : "false");
+    if (!args.haptics) std::printf("supportsHandTracking: %s\n", s.supports_hand_tracking ? "true" : "false");
     if (s.data_source_enabled) std::printf("XR_EXT_hand_tracking_data_source: enabled\n");
   }
   void operator()(const engine::XrProbeHeadlessRefused& h) const {
@@ -65,8 +68,13 @@ struct ProbePrinter {
     const char* kind = s.kind == XrProbeSessionKind::headless ? "headless (XR_MND_headless)"
                                                               : "Vulkan graphics binding (XR_KHR_vulkan_enable2)";
     const std::string device = s.device.empty() ? "" : " on " + s.device;
-    std::printf("Session: %s%s; locating %s hand joints in %s space.\n\n", kind, device.c_str(), args.hand.c_str(),
-                args.space.c_str());
+    if (args.haptics) {
+      std::printf("Session: %s%s; checking the fingertip devices (XR_PROPRIO_fingertip_haptics).\n\n", kind,
+                  device.c_str());
+    } else {
+      std::printf("Session: %s%s; locating %s hand joints in %s space.\n\n", kind, device.c_str(), args.hand.c_str(),
+                  args.space.c_str());
+    }
     std::fflush(stdout);
   }
   void operator()(const engine::XrProbeZeroDisplayTime&) const {
@@ -95,7 +103,18 @@ struct ProbePrinter {
     }
     std::fflush(stdout);
   }
+  void operator()(const engine::XrProbeHapticsDevices& d) const {
+    std::printf("Fingertip devices:\n");
+    for (const auto& f : d.fingers) {
+      std::printf("  %-5s %-6s %-32s %s, %u DoF, max normal %.2f N, max shear %.2f N\n",
+                  std::string(engine::to_string(f.hand)).c_str(), f.finger.c_str(), f.device.c_str(),
+                  f.connected ? "connected" : "NOT CONNECTED", f.force_dofs, f.max_normal_n, f.max_shear_n);
+    }
+    std::printf("Pressing each with %.2f N for 0.3 s, then releasing:\n", engine::xr_probe_haptics_press_n());
+    std::fflush(stdout);
+  }
   void operator()(const engine::XrProbeSummary& s) const {
+    if (args.haptics) return;  // the presses are the summary
     if (s.interrupted) std::printf("\nInterrupted.\n");
     std::printf("\nSummary over %.1f s, %llu frames, %s session:\n", s.run_s, static_cast<unsigned long long>(s.frames),
                 s.kind == XrProbeSessionKind::headless ? "headless" : "Vulkan");
@@ -152,6 +171,31 @@ struct ProbePrinter {
   }
 };
 
+int run_haptics_check(const engine::XrProbeOptions& options, const ProbeArgs& a) {
+  const ProbePrinter printer{a};
+  auto result =
+      engine::run_xr_probe_haptics(options, [&](const engine::XrProbeEvent& e) { std::visit(printer, e); });
+  if (!result) {
+    if (!result.error().message.empty()) logger().error("{}", result.error().message);
+    return result.error().code == Errc::unsupported ? kExitNoHandTracking : kExitError;
+  }
+  int failed = 0;
+  for (const auto& f : *result) {
+    const std::string released =
+        f.released_after_s ? fmt::format("released after {:.0f} ms", *f.released_after_s * 1e3) : "NOT released within 0.2 s";
+    std::printf("  %-5s %-6s commanded %.2f N, measured %.2f N, %s: %s\n", std::string(engine::to_string(f.hand)).c_str(),
+                f.finger.c_str(), f.peak_commanded_n, f.peak_measured_n, released.c_str(), f.passed() ? "ok" : "FAILED");
+    failed += !f.passed();
+  }
+  if (failed) {
+    std::printf("%d of %zu fingertip devices FAILED: check the layer's log, the device's cable and its model "
+                "('proprio haptics devices', docs/xr-proprio-fingertip-haptics.md).\n", failed, result->size());
+    return kExitNeverActive;
+  }
+  std::printf("All %zu fingertip devices pressed and released.\n", result->size());
+  return kExitOk;
+}
+
 int run_xr_probe(const ProbeArgs& a) {
   engine::XrProbeOptions options;
   options.duration_s = a.seconds;
@@ -170,6 +214,11 @@ int run_xr_probe(const ProbeArgs& a) {
 
   g_sigint_stop.store(false);
   auto previous = std::signal(SIGINT, on_sigint_stop);
+  if (a.haptics) {
+    const int rc = run_haptics_check(options, a);
+    std::signal(SIGINT, previous);
+    return rc;
+  }
   const ProbePrinter printer{a};
   auto result = engine::run_xr_probe(options, [&](const engine::XrProbeEvent& e) { std::visit(printer, e); });
   std::signal(SIGINT, previous);
@@ -216,6 +265,10 @@ void add_xr_probe_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--data-source", args->data_source,
                 "Also enable XR_EXT_hand_tracking_data_source when offered, and report each hand's data source "
                 "(Debian's 1.0.20 core_validation layer rejects this extension's structs)");
+  cmd->add_flag("--haptics", args->haptics,
+                "Check the fingertip devices behind XR_PROPRIO_fingertip_haptics instead of the hands: list them, "
+                "press each with 0.5 N for 0.3 s and report what the layer commanded, what the device measured and "
+                "whether the force was released (exit 3 if a device failed, 2 without the extension or devices)");
   cmd->callback([args, &exit_code] { exit_code = run_xr_probe(*args); });
 }
 

@@ -143,7 +143,9 @@ constexpr CommandInfo kCommands[] = {
      "Exit status: 0 a hand was active and no call failed; 1 an error, including any failed OpenXR call (reported "
      "with its XrResult); "
      "2 XR_EXT_hand_tracking not offered, or supportsHandTracking false; 3 the run completed without a failed "
-     "call but no hand was ever active.",
+     "call but no hand was ever active.\n"
+     "--haptics checks the fingertip devices instead (XR_PROPRIO_fingertip_haptics): 0 every device pressed and "
+     "released; 2 the extension is not offered or the layer has no [haptics] table; 3 a device failed its press.",
      Family::engine, false},
 #endif
 };

@@ -142,8 +142,31 @@ struct XrProbeSummary {
 
   bool any_active() const;
 };
+// `xr-probe --haptics`: one fingertip device through XR_PROPRIO_fingertip_haptics.
+struct XrProbeHapticsFinger {
+  XrProbeHand hand = XrProbeHand::left;
+  std::string finger;  // "thumb" .. "little"
+  int finger_index = 0;
+  std::string device;
+  bool connected = false;
+  std::uint32_t force_dofs = 0;
+  double max_normal_n = 0.0, max_shear_n = 0.0;
+  // The press (xr_probe_haptics_press_n() on the pad for 0.3 s): the largest
+  // normal force the layer commanded and the device measured, and how long
+  // after the last submission the command was below 0.01 N (none: not within 0.2 s).
+  double peak_commanded_n = 0.0, peak_measured_n = 0.0;
+  std::optional<double> released_after_s;
+  // Connected, commanded at least 80 % of the press, measured over 0.1 N, released.
+  bool passed() const;
+};
+double xr_probe_haptics_press_n();
+struct XrProbeHapticsDevices {  // once the haptics object exists: every present finger, before the presses
+  std::vector<XrProbeHapticsFinger> fingers;
+};
+
 using XrProbeEvent = std::variant<XrProbeDataSourceNotOffered, XrProbeRuntime, XrProbeSystem, XrProbeSessionStarted,
-                                  XrProbeHeadlessRefused, XrProbeZeroDisplayTime, XrProbeSecond, XrProbeSummary>;
+                                  XrProbeHeadlessRefused, XrProbeZeroDisplayTime, XrProbeSecond, XrProbeSummary,
+                                  XrProbeHapticsDevices>;
 using XrProbeReport = std::function<void(const XrProbeEvent&)>;
 
 // Error codes of run_xr_probe: Errc::unsupported means only "no hand tracking"
@@ -155,5 +178,11 @@ inline constexpr Errc kXrProbeNoHandTracking = Errc::unsupported;
 // Runs the probe to its end. The summary is also reported (XrProbeSummary)
 // before the session is torn down; a hand was seen when any_active().
 Result<XrProbeSummary> run_xr_probe(const XrProbeOptions& options, const XrProbeReport& report);
+
+// Checks the fingertip devices behind XR_PROPRIO_fingertip_haptics (no hand
+// trackers): lists them, presses each in turn and reads the layer's state.
+// Errc::unsupported: the extension is not offered or no devices are configured.
+Result<std::vector<XrProbeHapticsFinger>> run_xr_probe_haptics(const XrProbeOptions& options,
+                                                               const XrProbeReport& report);
 
 }  // namespace proprio::engine

@@ -18,7 +18,9 @@
 # layer status` reports the installed layer through the installed manifest and the
 # OpenXR loader's own search path; `proprio xr-probe` on the mock runtime gets
 # hands from the installed layer (LD_DEBUG shows which library the loader
-# opened). Exits non-zero on the first failure.
+# opened); `proprio xr-probe --haptics` presses an emulated fingertip device
+# through the installed haptics plugin and its installed model. Exits non-zero
+# on the first failure.
 set -euo pipefail
 
 prefix="" runtime_json="" version="" hide=()
@@ -143,4 +145,22 @@ loaded=$(grep -oE 'file=[^ ]*libXrApiLayer_proprio_hand_tracking\.so' <<<"$probe
 [ -n "$loaded" ] || fail "no Proprio layer library was loaded"
 [ "$(readlink -f "$loaded")" = "$layer_lib" ] || fail "the loader loaded $loaded, not the installed $layer_lib"
 ok "proprio xr-probe: hands from the installed layer ($loaded) on the mock runtime"
+
+# --- fingertip haptics from the installed haptics plugin and its installed device model
+cat "$tmp/layer.toml" >"$tmp/layer_haptics.toml"
+printf '\n[haptics]\ndevices = "emulated"\nmodel = "platform_3dof"\nright = ["index"]\n' >>"$tmp/layer_haptics.toml"
+set +e
+haptics=$(LD_DEBUG=files PROPRIO_LAYER_CONFIG=$tmp/layer_haptics.toml "$cli" xr-probe --haptics 2>&1)
+rc=$?
+set -e
+grep -vE '^ *[0-9]+:' <<<"$haptics" | sed 's/^/    /' || true
+[ $rc -eq 0 ] || fail "proprio xr-probe --haptics exited $rc"
+plugin=$(grep -oE 'file=[^ ]*libproprio_source_haptics\.so' <<<"$haptics" | head -1 | sed 's/^file=//')
+[ -n "$plugin" ] || fail "the layer loaded no haptics plugin"
+case $(readlink -f "$plugin") in
+  "$prefix"/*) ;;
+  *) fail "the layer loaded the haptics plugin $plugin, not the installed one under $prefix" ;;
+esac
+grep -q "right index  commanded" <<<"$haptics" || fail "xr-probe --haptics pressed no right index"
+ok "proprio xr-probe --haptics: the installed haptics plugin ($plugin) pressed an emulated device"
 echo "install smoke test passed ($prefix)"

@@ -10,6 +10,7 @@
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/recording.hpp"
 #include "proprio/core/xr_interop.hpp"
+#include "proprio/openxr/XR_PROPRIO_fingertip_haptics.h"
 
 using namespace proprio;
 
@@ -214,6 +215,61 @@ TEST_F(LayerDispatch, LocatingAllocatesNothing) {
   info.time = 0;
   EXPECT_EQ(locate_fn(t, &info, &locations_), XR_ERROR_TIME_INVALID);
   EXPECT_EQ(g_allocations - before, 0u);
+}
+
+// XR_PROPRIO_fingertip_haptics' per-frame calls allocate nothing on the
+// app's thread either: forces in fingertip frames and in a base space, a
+// collider's pose, the proxy hand and the devices' state.
+TEST_F(LayerDispatch, FingertipHapticsPerFrameCallsAllocateNothing) {
+  use_config("[[source]]\ntype = \"replay\"\nspace = \"local\"\npath = \"" +
+             write_still_recording(dir_.path(), 10 * kNsPerSecond).string() +
+             "\"\n[haptics]\ndevices = \"emulated\"\nright = [\"index\", \"thumb\"]\n");
+  ASSERT_EQ(create({XR_EXT_HAND_TRACKING_EXTENSION_NAME, XR_PROPRIO_FINGERTIP_HAPTICS_EXTENSION_NAME}), XR_SUCCESS);
+  const XrSession s = session();
+  const auto world = reinterpret_cast<XrSpace>(0x4004);
+  auto create_info = xr_struct<XrFingertipHapticsCreateInfoPROPRIO>(XR_TYPE_FINGERTIP_HAPTICS_CREATE_INFO_PROPRIO);
+  create_info.contactSimulation = XR_TRUE;
+  create_info.worldSpace = world;
+  XrFingertipHapticsPROPRIO h = XR_NULL_HANDLE;
+  ASSERT_EQ(chain_.get<PFN_xrCreateFingertipHapticsPROPRIO>(instance_, "xrCreateFingertipHapticsPROPRIO")(s, &create_info, &h),
+            XR_SUCCESS);
+  auto collider_info = xr_struct<XrHapticColliderCreateInfoPROPRIO>(XR_TYPE_HAPTIC_COLLIDER_CREATE_INFO_PROPRIO);
+  collider_info.shape = XR_HAPTIC_COLLIDER_SHAPE_BOX_PROPRIO;
+  collider_info.halfExtents = {0.1f, 0.02f, 0.1f};
+  collider_info.friction = 0.8f;
+  collider_info.poseInfo = xr_struct<XrHapticColliderPoseInfoPROPRIO>(XR_TYPE_HAPTIC_COLLIDER_POSE_INFO_PROPRIO);
+  collider_info.poseInfo.space = world;
+  collider_info.poseInfo.time = fake_next::xr_now();
+  collider_info.poseInfo.pose = {{0, 0, 0, 1}, {0, 0.9f, -0.3f}};
+  XrHapticColliderPROPRIO collider = XR_NULL_HANDLE;
+  ASSERT_EQ(chain_.get<PFN_xrCreateHapticColliderPROPRIO>(instance_, "xrCreateHapticColliderPROPRIO")(h, &collider_info, &collider),
+            XR_SUCCESS);
+  auto apply = chain_.get<PFN_xrApplyFingertipForcesPROPRIO>(instance_, "xrApplyFingertipForcesPROPRIO");
+  auto move = chain_.get<PFN_xrSetHapticColliderPosePROPRIO>(instance_, "xrSetHapticColliderPosePROPRIO");
+  auto proxy = chain_.get<PFN_xrLocateProxyHandJointsPROPRIO>(instance_, "xrLocateProxyHandJointsPROPRIO");
+  auto state = chain_.get<PFN_xrGetFingertipHapticsStatePROPRIO>(instance_, "xrGetFingertipHapticsStatePROPRIO");
+  auto forces = xr_struct<XrFingertipForcesPROPRIO>(XR_TYPE_FINGERTIP_FORCES_PROPRIO);
+  forces.hand = XR_HAND_RIGHT_EXT;
+  forces.forces[XR_FINGERTIP_INDEX_PROPRIO] = {0.0f, 0.5f, 0.0f};
+  auto info = xr_struct<XrHandJointsLocateInfoEXT>(XR_TYPE_HAND_JOINTS_LOCATE_INFO_EXT);
+  info.baseSpace = world;
+  auto st = xr_struct<XrFingertipHapticsStatePROPRIO>(XR_TYPE_FINGERTIP_HAPTICS_STATE_PROPRIO);
+  const std::size_t before = g_allocations;
+  for (int i = 0; i < 200; ++i) {
+    const XrTime t = fake_next::xr_now();
+    forces.baseSpace = i % 2 ? world : XR_NULL_HANDLE;
+    forces.time = t;
+    ASSERT_EQ(apply(h, &forces), XR_SUCCESS);
+    collider_info.poseInfo.time = t;
+    collider_info.poseInfo.pose.position.y = 0.9f + 0.0001f * static_cast<float>(i);
+    ASSERT_EQ(move(collider, &collider_info.poseInfo), XR_SUCCESS);
+    info.time = t;
+    ASSERT_EQ(proxy(h, XR_HAND_RIGHT_EXT, &info, &locations_), XR_SUCCESS);
+    ASSERT_EQ(state(h, XR_HAND_RIGHT_EXT, &st), XR_SUCCESS);
+  }
+  EXPECT_EQ(g_allocations - before, 0u);
+  EXPECT_EQ(chain_.get<PFN_xrDestroyFingertipHapticsPROPRIO>(instance_, "xrDestroyFingertipHapticsPROPRIO")(h), XR_SUCCESS);
+  EXPECT_EQ(move(collider, &collider_info.poseInfo), XR_ERROR_HANDLE_INVALID) << "colliders go with their parent";
 }
 
 TEST_F(LayerDispatch, ValidationErrorsFollowTheSpec) {

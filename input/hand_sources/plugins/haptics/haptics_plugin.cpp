@@ -110,15 +110,13 @@ class HapticsService final : public FingertipHapticsService, public haptics::Ext
 
   bool apply_forces(Handedness hand, const std::array<Vec3, kFingerCount>& f_in_tip, TimeNs now) noexcept override {
     std::lock_guard lock(app_mutex_);
-    bool finite = true;
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       if (channels_[c].side != hand) continue;
       const Vec3& f = f_in_tip[static_cast<std::size_t>(channels_[c].finger)];
-      finite &= f.allFinite();
       app_[c].publish({FingertipForce::from_tip_frame(f), now, true});
     }
-    for (const Vec3& f : f_in_tip) finite &= f.allFinite();
-    return finite;
+    // Also a finger without a device: the call was invalid either way.
+    return std::all_of(f_in_tip.begin(), f_in_tip.end(), [](const Vec3& f) { return f.allFinite(); });
   }
 
   void vibrate(Handedness hand, double amplitude, DurationNs duration, TimeNs now) noexcept override {

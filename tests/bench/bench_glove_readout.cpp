@@ -30,7 +30,7 @@ std::vector<double> one_cycle() {
 void BM_ReadoutPush(benchmark::State& state) {
   stretch_glove::ReadoutOptions o;
   o.solve_every = static_cast<int>(state.range(0));
-  auto readout = stretch_glove::MatrixReadout::create(StretchGloveLayout::thesis_default(), o);
+  auto readout = stretch_glove::make_readout(StretchGloveLayout::thesis_default(), o);
   const auto cm = one_cycle();
   stretch_glove::CellFrame frame = readout->make_frame();
   for (std::size_t k = 0; k < 2 * cm.size(); ++k) readout->push(k % cm.size(), cm[k % cm.size()], 0, frame);
@@ -47,7 +47,7 @@ BENCHMARK(BM_ReadoutPush)->Arg(16)->Arg(1);
 // A whole C_m vector solved at once (no window), fault-free and with one
 // NaN row (the cached reduced factorisation).
 void BM_ReadoutSolveBatch(benchmark::State& state) {
-  auto readout = stretch_glove::MatrixReadout::create(StretchGloveLayout::thesis_default());
+  auto readout = stretch_glove::make_readout(StretchGloveLayout::thesis_default());
   auto cm = one_cycle();
   if (state.range(0) == 1) cm[40] = std::nan("");
   stretch_glove::CellFrame frame = readout->make_frame();

@@ -207,7 +207,7 @@ Result<stretch_glove::MinMaxCalibration> calibrate_from_board(const StretchGlove
   o.stream.expected_bottom_strips = static_cast<std::uint8_t>(layout.bottom_strips);
   devices::StretchDevice device(std::make_unique<hid::HidapiTransport>(devices::stretch_board_selector()), o);
   if (auto st = device.start(); !st) return st.error();
-  auto readout = stretch_glove::MatrixReadout::create(layout);
+  auto readout = stretch_glove::make_readout(layout);
   if (!readout) return readout.error();
   auto calibrator = stretch_glove::MinMaxCalibrator::create(layout);
   if (!calibrator) return calibrator.error();

@@ -9,7 +9,7 @@
 namespace proprio::stretch_glove {
 
 Result<DatasetRecorder> DatasetRecorder::create(const StretchGloveLayout& layout, ReadoutOptions readout) {
-  auto r = MatrixReadout::create(layout, readout);
+  auto r = make_readout(layout, readout);
   if (!r) return r.error();
   return DatasetRecorder(layout, std::move(*r));
 }

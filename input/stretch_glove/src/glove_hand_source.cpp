@@ -19,7 +19,7 @@ std::string GloveSourceStats::describe() const {
 Result<std::unique_ptr<GloveHandSource>> GloveHandSource::create(const StretchGloveLayout& layout,
                                                                  MinMaxCalibration calibration, OnnxPoseModel model,
                                                                  GloveHandSourceOptions options) {
-  auto readout = MatrixReadout::create(layout, options.readout);
+  auto readout = make_readout(layout, options.readout);
   if (!readout) return readout.error();
   auto tracker = GloveTracker::create(layout, std::move(calibration), std::move(model), options.tracker);
   if (!tracker) return tracker.error();

@@ -96,7 +96,7 @@ Result<GloveSessionResult> run_glove_session(const StretchGloveLayout& layout, c
   if (!model) return model.error();
   auto model_filtered = stretch_glove::OnnxPoseModel::load(model_path, layout);
   if (!model_filtered) return model_filtered.error();
-  auto readout = stretch_glove::MatrixReadout::create(layout);
+  auto readout = stretch_glove::make_readout(layout);
   if (!readout) return readout.error();
   auto calibrator = stretch_glove::MinMaxCalibrator::create(layout);
   if (!calibrator) return calibrator.error();
@@ -333,7 +333,7 @@ Result<SimulatedCalibration> calibrate_simulated(const StretchGloveLayout& layou
   sess.task_s = 0.0;
   sess.task_motion.hand = subject->dominant_hand;
   sim::StretchGloveSession exploration(std::move(*simulator), sess);
-  auto readout = stretch_glove::MatrixReadout::create(layout);
+  auto readout = stretch_glove::make_readout(layout);
   if (!readout) return readout.error();
   auto calibrator = stretch_glove::MinMaxCalibrator::create(layout);
   if (!calibrator) return calibrator.error();

@@ -69,7 +69,7 @@ JobResult simulate(const Job& job, const SimDatasetOptions& a, const StretchGlov
   auto simulator = sim::StretchGloveSimulator::create(layout, *shape, opts, job.session);
   if (!simulator) return fail(simulator.error());
   sim::StretchGloveSession session(std::move(*simulator), session_options(a, job.subject.dominant_hand));
-  auto readout = stretch_glove::MatrixReadout::create(layout);
+  auto readout = stretch_glove::make_readout(layout);
   if (!readout) return fail(readout.error());
   auto calibrator = stretch_glove::MinMaxCalibrator::create(layout);
   if (!calibrator) return fail(calibrator.error());

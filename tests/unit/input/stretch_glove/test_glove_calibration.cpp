@@ -374,7 +374,7 @@ TEST(GloveDataset, SimulatedPipelineCalibratesIntoRange) {
   so.exploration_s = 16.0;  // about ten postures: enough to span most of each cell's range
   so.task_s = 4.0;
   sim::StretchGloveSession session(std::move(*sim), so);
-  auto readout = MatrixReadout::create(thesis_layout());
+  auto readout = make_readout(thesis_layout());
   ASSERT_TRUE(readout.ok());
   auto cal = make_calibrator();
   CellFrame frame = readout->make_frame();

@@ -19,8 +19,8 @@ namespace {
 
 using proprio::testing_support::thesis_layout;
 
-MatrixReadout make_readout(ReadoutOptions o = {}) {
-  auto r = MatrixReadout::create(thesis_layout(), o);
+MatrixReadout thesis_readout(ReadoutOptions o = {}) {
+  auto r = make_readout(thesis_layout(), o);
   EXPECT_TRUE(r.ok()) << r.error().message;
   return std::move(*r);
 }
@@ -51,7 +51,7 @@ std::vector<double> random_cells(Rng& rng) {
 }
 
 TEST(GloveReadout, NoiselessBatchRecoveryIsExact) {
-  auto r = make_readout();
+  auto r = thesis_readout();
   Rng rng(1);
   CellFrame f = r.make_frame();
   for (int trial = 0; trial < 10; ++trial) {
@@ -64,7 +64,7 @@ TEST(GloveReadout, NoiselessBatchRecoveryIsExact) {
 }
 
 TEST(GloveReadout, StreamingRecoversAStaticHandAfterOneCycle) {
-  auto r = make_readout();
+  auto r = thesis_readout();
   Rng rng(2);
   const auto cells = random_cells(rng);
   const auto cm = measure_all(cells);
@@ -94,7 +94,7 @@ TEST(GloveReadout, StreamingRecoversAStaticHandAfterOneCycle) {
 // Least squares with white noise sigma on every measurement: the error of
 // cell c has standard deviation sigma * |row c of M^+| (M^+ = (M^T M)^-1 M^T).
 TEST(GloveReadout, NoisyErrorMatchesLeastSquaresTheory) {
-  auto r = make_readout();
+  auto r = thesis_readout();
   const Eigen::MatrixXd M = thesis_layout().measurement_matrix();
   const Eigen::MatrixXd P = (M.transpose() * M).ldlt().solve(M.transpose());
   const double sigma = 0.2;
@@ -129,7 +129,7 @@ TEST(GloveReadout, MeanFilterOverIndependentFramesShrinksNoiseBySqrtN) {
     ReadoutOptions o;
     o.solve_every = 182;
     o.mean_filter_frames = frames_in_filter;
-    auto r = make_readout(o);
+    auto r = thesis_readout(o);
     Rng rng(4);
     const auto cells = random_cells(rng);
     const auto cm = measure_all(cells);
@@ -152,7 +152,7 @@ TEST(GloveReadout, MeanFilterOverIndependentFramesShrinksNoiseBySqrtN) {
 }
 
 TEST(GloveReadout, BadReadingsAreLeftOut) {
-  auto r = make_readout();
+  auto r = thesis_readout();
   Rng rng(5);
   const auto cells = random_cells(rng);
   const auto cm = measure_all(cells);
@@ -173,7 +173,7 @@ TEST(GloveReadout, BadReadingsAreLeftOut) {
 }
 
 TEST(GloveReadout, StreamedNanStaysOutUntilMeasuredAgain) {
-  auto r = make_readout();
+  auto r = thesis_readout();
   Rng rng(6);
   const auto cells = random_cells(rng);
   const auto cm = measure_all(cells);
@@ -197,7 +197,7 @@ TEST(GloveReadout, StreamedNanStaysOutUntilMeasuredAgain) {
 }
 
 TEST(GloveReadout, CellsWithoutRowsAreUnobservable) {
-  auto r = make_readout();
+  auto r = thesis_readout();
   Rng rng(7);
   const auto cells = random_cells(rng);
   auto cm = measure_all(cells);
@@ -234,7 +234,7 @@ TEST(GloveReadout, DeadCellIsFlagged) {
   sim::StretchFaults faults;
   faults.dead_cells = {dead};
   sim->set_faults(faults);
-  auto r = make_readout();
+  auto r = thesis_readout();
   CellFrame f = r.make_frame();
   bool seen = false;
   int first_dead_frame = -1;
@@ -270,7 +270,7 @@ TEST(GloveReadout, DeadCellIsFlagged) {
 TEST(GloveReadout, SpikeDoesNotKillALiveCell) {
   // A spike on the row that pulls one cell down hardest: for a cycle least
   // squares puts that cell below 20 % of C0, yet it is not declared dead.
-  auto r = make_readout();
+  auto r = thesis_readout();
   const Eigen::MatrixXd M = thesis_layout().measurement_matrix();
   const Eigen::MatrixXd P = (M.transpose() * M).ldlt().solve(M.transpose());
   Eigen::Index cell_i = 0, row_i = 0;
@@ -304,7 +304,7 @@ TEST(GloveReadout, FollowsTheSimulatorUnderNoise) {
   const HandAngles pose = sim::ExplorationMotion::relaxed();
   std::vector<double> truth(thesis_layout().cell_count());
   sim->cell_capacitances(pose, truth);
-  auto r = make_readout();
+  auto r = thesis_readout();
   CellFrame f = r.make_frame();
   double worst = 0.0;
   for (int k = 0; k < 4 * 182; ++k) {
@@ -319,10 +319,10 @@ TEST(GloveReadout, FollowsTheSimulatorUnderNoise) {
 TEST(GloveReadout, RejectsBadInput) {
   ReadoutOptions o;
   o.solve_every = 0;
-  auto bad = MatrixReadout::create(thesis_layout(), o);
+  auto bad = make_readout(thesis_layout(), o);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("solve_every"), std::string::npos);
-  auto r = make_readout();
+  auto r = thesis_readout();
   CellFrame f = r.make_frame();
   EXPECT_FALSE(r.push(182, 10.0, 0, f));
   EXPECT_EQ(r.rejected_updates(), 1u);
@@ -335,8 +335,8 @@ TEST(GloveReadout, RejectsBadInput) {
 // at the end of the burst that holds it, from all 24 measurements, with the
 // 24th one's time; record() alone never solves.
 TEST(GloveReadout, DeferredSolveUsesTheWholeBurst) {
-  auto burst = make_readout();
-  auto each = make_readout();
+  auto burst = thesis_readout();
+  auto each = thesis_readout();
   Rng rng(7);
   const auto before = measure_all(random_cells(rng));
   const auto after = measure_all(random_cells(rng));
@@ -366,11 +366,11 @@ TEST(GloveReadout, DeferredSolveUsesTheWholeBurst) {
   EXPECT_EQ(deferred_frames, static_cast<int>(k / 16));
   EXPECT_EQ(burst.updates(), each.updates());
   // The first deferred frame held measurements 17-24 (the "after" hand), which the push() frame at 16 did not.
-  auto first = make_readout();
+  auto first = thesis_readout();
   CellFrame f1 = first.make_frame(), f2 = first.make_frame();
   for (std::size_t i = 0; i < 24; ++i) first.record(i, value(i), static_cast<TimeNs>(i));
   ASSERT_TRUE(first.solve_due(f1));
-  auto pushed = make_readout();
+  auto pushed = thesis_readout();
   for (std::size_t i = 0; i < 16; ++i) pushed.push(i, value(i), static_cast<TimeNs>(i), f2);
   EXPECT_EQ(f1.rows_used, 24u);
   EXPECT_EQ(f2.rows_used, 16u);

@@ -96,7 +96,7 @@ TEST(GloveTracker, ADeadCellCostsItsFingerTheTrackedFlagOnly) {
   so.task_s = 15.0;
   sim::StretchGloveSession session(std::move(*simulator), so);
 
-  auto readout = MatrixReadout::create(layout);
+  auto readout = make_readout(layout);
   auto calibrator = MinMaxCalibrator::create(layout);
   ASSERT_TRUE(readout && calibrator);
   CellFrame frame = readout->make_frame();

@@ -433,7 +433,9 @@ void release_session(Session& s) {
 }
 
 // The session's fingertip devices, through the haptics plugin. A failure is
-// logged: the app then sees supportsFingertipHaptics = false.
+// logged; the app's xrCreateFingertipHapticsPROPRIO then returns
+// XR_ERROR_FEATURE_UNSUPPORTED (supportsFingertipHaptics says only what is
+// configured: it is asked before any session exists).
 void start_haptics(const Instance& inst, Session& s) {
   auto plugin = hand_sources::load_plugin("haptics");
   if (plugin && (*plugin)->start_haptics == nullptr) {

@@ -35,6 +35,8 @@ void add_haptics_device_commands(CLI::App& haptics, int& exit_code);
 // `layer install|uninstall|status|init-config` and `xr-probe`: built when the
 // OpenXR layer is part of the build (PROPRIO_HAVE_OPENXR_LAYER).
 void add_layer_commands(CLI::App& app, int& exit_code);
+// `array layout|check`: stretch sensor array layouts (proprio::stretch_array).
+void add_array_commands(CLI::App& app, int& exit_code);
 // `psychometric fit`, `stats ...` and `study ...` (proprio::study).
 void add_study_commands(CLI::App& app, int& exit_code);
 // `run SCENE`: the engine (proprio::engine).

@@ -113,6 +113,10 @@ constexpr CommandInfo kCommands[] = {
      Family::devices, true},
     {"haptics", "Contact simulation and fingertip haptic devices", Family::haptics, true},
 #ifdef PROPRIO_HAVE_STUDY
+    {"array",
+     "Stretch sensor arrays (docs/stretch-arrays.md): 'array layout' writes a shipped layout to start from, "
+     "'array check' says whether a layout's cells can be read out",
+     Family::core, true},
     {"psychometric", "Psychometric functions (docs/study.md)", Family::core, true},
     {"stats", "Statistics on wide CSVs (one row per subject, one column per condition)", Family::core, true},
     {"study", "Study designs and whole-study analysis (docs/study.md)", Family::core, true},

@@ -12,6 +12,7 @@ void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_cod
 #ifdef PROPRIO_CLI_FAMILY_CORE
   add_sim_hand_command(app, exit_code);
   add_replay_command(app, exit_code);
+  add_array_commands(app, exit_code);
 #ifdef PROPRIO_HAVE_STUDY
   add_study_commands(app, exit_code);
 #endif

@@ -9,8 +9,10 @@
 # xr_fingertip_haptics, XrApiLayer_proprio_hand_tracking and proprio_mock_openxr_runtime) first. Exit status 2 from
 # the sample means the layer does not offer XR_PROPRIO_fingertip_haptics, or offers it without devices: a failure
 # here.
-if(NOT PROPRIO_BUILD_TESTS OR NOT TARGET xr_fingertip_haptics OR NOT TARGET proprio_mock_openxr_runtime
-   OR NOT TARGET XrApiLayer_proprio_hand_tracking)
+# Not in the sanitizer builds: they build only the sanitized test programs
+# (./dev's ASAN_TARGETS), so the sample would be registered but never built.
+if(NOT PROPRIO_BUILD_TESTS OR PROPRIO_SANITIZE OR NOT TARGET xr_fingertip_haptics
+   OR NOT TARGET proprio_mock_openxr_runtime OR NOT TARGET XrApiLayer_proprio_hand_tracking)
   return()
 endif()
 

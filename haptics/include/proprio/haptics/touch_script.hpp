@@ -4,7 +4,11 @@
 // curled, the wrist approaching a surface point from above, pressing a set
 // depth below it (the tracked hand penetrates; the proxy does not), sliding
 // along the surface and lifting off, repeated.
+//
+// Also a static thumb-index pinch of an upright cylinder (pinch_upright_cylinder):
+// the two-hand servo benchmark's grasp of the peg.
 #include "proprio/core/hand_model.hpp"
+#include "proprio/core/result.hpp"
 
 namespace proprio::haptics {
 
@@ -37,5 +41,30 @@ class TouchScript {
   Quat q_world_wrist_;
   Vec3 p_tip_in_wrist_;  // index tip, in the wrist frame, for the pointing pose
 };
+
+// A tip pinch of an upright cylinder (axis along world +Y) between the thumb
+// and the index pad, the hand coming from one side, back of the hand up-ish;
+// middle, ring and little curled out of the way. The fingers' closure is
+// found on the hand model (thumb-to-index distance against the cylinder's
+// diameter plus both tips' radii), so it fits any hand size that can span it.
+struct CylinderPinchOptions {
+  Vec3 p_axis_in_world = Vec3(0.0, 0.95, -0.40);  // on the cylinder's axis, at the pinch's height
+  double radius_m = 0.02584;
+  // Horizontal, from the cylinder toward the wrist: where the hand comes from.
+  Vec3 approach_from = Vec3::UnitX();
+  // How far each tracked fingertip ends up inside the surface: the proxy
+  // stops on it, the joint servos squeeze (about 0.3-0.7 N per tip at 6 mm
+  // on the peg-in-hole peg).
+  double squeeze_m = 0.006;
+};
+struct CylinderPinch {
+  HandAngles open{};    // about 7 mm of clearance either side
+  HandAngles closed{};  // both tracked tips squeeze_m inside the surface
+  Pose T_world_wrist_start;  // with `open`: the thumb 3 mm off the surface, touching nothing
+  Pose T_world_wrist;        // with `closed`: the pinch centred on the axis
+};
+// Errc::invalid_argument when the hand cannot span the cylinder (or closes
+// past it with no room to squeeze) in this posture.
+Result<CylinderPinch> pinch_upright_cylinder(const HandModel& model, Handedness hand, const CylinderPinchOptions& o);
 
 }  // namespace proprio::haptics

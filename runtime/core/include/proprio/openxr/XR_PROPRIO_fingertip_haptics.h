@@ -79,8 +79,8 @@ typedef struct XrFingertipHapticsCreateInfoPROPRIO {
   /* XR_TRUE: run the contact simulation (level 2). */
   XrBool32 contactSimulation;
   /* Contact simulation only: a space that stays still in the world (a LOCAL
-   * or STAGE reference space). Colliders live in it and gravity points along
-   * its -Y. Ignored (may be XR_NULL_HANDLE) without the simulation. */
+   * or STAGE reference space). Colliders and the proxy hands live in it
+   * too. Ignored (may be XR_NULL_HANDLE) without the simulation. */
   XrSpace worldSpace;
 } XrFingertipHapticsCreateInfoPROPRIO;
 

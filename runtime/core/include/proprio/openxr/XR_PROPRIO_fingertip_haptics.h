@@ -79,8 +79,8 @@ typedef struct XrFingertipHapticsCreateInfoPROPRIO {
   /* XR_TRUE: run the contact simulation (level 2). */
   XrBool32 contactSimulation;
   /* Contact simulation only: a space that stays still in the world (a LOCAL
-   * or STAGE reference space). Colliders and the proxy hands live in it
-   * too. Ignored (may be XR_NULL_HANDLE) without the simulation. */
+   * or STAGE reference space), where the colliders and the proxy hands
+   * are. Ignored (may be XR_NULL_HANDLE) without the simulation. */
   XrSpace worldSpace;
 } XrFingertipHapticsCreateInfoPROPRIO;
 

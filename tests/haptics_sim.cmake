@@ -5,6 +5,7 @@ if(PROPRIO_BUILD_TESTS)
       unit/haptics/test_contact_sim.cpp
       unit/haptics/test_servo_loop.cpp
       unit/haptics/test_hid_channels.cpp
+      unit/haptics/test_touch_script.cpp
     DEPS proprio::haptics)
   target_compile_definitions(haptics_sim_tests PRIVATE PROPRIO_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
 endif()

@@ -2,8 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-
-#include <fmt/format.h>
+#include <string>
 
 namespace proprio::haptics {
 
@@ -106,11 +105,11 @@ Result<CylinderPinch> pinch_upright_cylinder(const HandModel& model, Handedness 
     if (s_open < 0.0 && d <= open_gap) s_open = s;
     if (d <= closed_gap) s_closed = s;
   }
-  if (s_open <= 0.0 || s_closed < 0.0) {
+  if (s_open <= 0.0 || s_closed < 0.0) {  // s_open 0: already narrower than open at s = 0
     return make_error(Errc::invalid_argument,
-                      fmt::format("pinch_upright_cylinder: this hand's thumb-index pinch does not span {:.0f} mm "
-                                  "and close to {:.0f} mm",
-                                  open_gap * 1e3, closed_gap * 1e3));
+                      "pinch_upright_cylinder: this hand's thumb-index pinch does not span " +
+                          std::to_string(std::lround(open_gap * 1e3)) + " mm and close to " +
+                          std::to_string(std::lround(closed_gap * 1e3)) + " mm");
   }
   CylinderPinch out;
   out.open = pinch_posture(model, s_open);

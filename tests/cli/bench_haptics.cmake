@@ -1,6 +1,6 @@
 # `proprio bench haptics --json` as a user runs it (issue 29): every case runs
-# as specified, or the command fails. The two-hand case must have the index
-# and middle of both hands on the peg in every timed tick. Timings are read
+# as specified, or the command fails. The two-hand case must have the thumb
+# and index of both hands pinching the peg in every timed tick. Timings are read
 # by people (docs/benchmarks.md), never asserted here.
 # Invoked by ctest with -DPROPRIO=<cli>.
 execute_process(COMMAND ${PROPRIO} bench haptics --seconds 0.5 --no-realtime --json
@@ -16,6 +16,7 @@ foreach(key mujoco_step_us servo_tick_us two_hands_servo_tick_us)
 endforeach()
 string(JSON devices GET "${out}" two_hands_servo_tick_us devices)
 string(JSON pressing GET "${out}" two_hands_servo_tick_us fingertips_pressing_the_peg)
-if(NOT devices EQUAL 6 OR NOT pressing EQUAL 4)
-  message(FATAL_ERROR "two-hand case: ${devices} devices, ${pressing} fingertips on the peg:\n${out}")
+string(JSON least GET "${out}" two_hands_servo_tick_us least_pad_force_n)
+if(NOT devices EQUAL 6 OR NOT pressing EQUAL 4 OR NOT least GREATER 0.05)
+  message(FATAL_ERROR "two-hand case: ${devices} devices, ${pressing} fingertips on the peg (least ${least} N):\n${out}")
 endif()

@@ -71,3 +71,30 @@ def _(t):
     env = t.layer_env(SOURCE + HAPTICS)
     env["XR_ENABLE_API_LAYERS"] = ""
     t.run("xr-probe", "--haptics", env=env, timeout=90).expect(rc=2, err=r"XR_PROPRIO_fingertip_haptics is not offered")
+
+
+@case("29 xr-probe --haptics with a [haptics] table the layer refused: exit 2, the layer's reason and the refusal said")
+def _(t):
+    haptics_probe(t, SOURCE + '[haptics]\ndevices = "emulated"\nright = ["pinky"]\n').expect(
+        rc=2, err=r"unknown finger 'pinky'(.|\n)*no fingertip devices.*one it refused")
+
+
+@case("29 xr-probe --haptics with a device model that does not exist: exit 1, the file named")
+def _(t):
+    haptics_probe(t, SOURCE + HAPTICS + 'model = "no_such_model"\n').expect(
+        rc=1, err=r"no_such_model\.toml' does not exist(.|\n)*xrCreateFingertipHapticsPROPRIO: XR_ERROR_FEATURE_UNSUPPORTED")
+
+
+@case("29 xr-probe --haptics on a session that is never FOCUSED: exit 1 after its wait, focus named, no press")
+def _(t):
+    env = t.layer_env(SOURCE + HAPTICS, {"PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES": "0"})
+    t.run("xr-probe", "--haptics", env=env, timeout=90).expect(
+        rc=1, err=r"did not become FOCUSED within 5 s.*XR_SESSION_STATE_VISIBLE", out=r"^(?!.*commanded).*$")
+
+
+@case("29 xr-probe --haptics losing focus during the presses: exit 1, said, not reported as a device fault")
+def _(t):
+    config = SOURCE + '[haptics]\ndevices = "emulated"\nleft = ["thumb", "index", "middle"]\nright = ["index"]\n'
+    env = t.layer_env(config, {"PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES": "150"})
+    t.run("xr-probe", "--haptics", env=env, timeout=90).expect(
+        rc=1, err=r"lost input focus during the presses.*XR_SESSION_STATE_VISIBLE", no_err=r"FAILED")

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <fmt/format.h>
@@ -110,7 +111,21 @@ struct ProbePrinter {
                   std::string(engine::to_string(f.hand)).c_str(), f.finger.c_str(), f.device.c_str(),
                   f.connected ? "connected" : "NOT CONNECTED", f.force_dofs, f.max_normal_n, f.max_shear_n);
     }
-    std::printf("Pressing each with %.2f N for 0.3 s, then releasing:\n", engine::xr_probe_haptics_press_n());
+    for (engine::XrProbeHand hand : {engine::XrProbeHand::left, engine::XrProbeHand::right}) {
+      std::string names;
+      for (const auto& [h, finger] : d.absent) {
+        if (h == hand) names += (names.empty() ? "" : ", ") + finger;
+      }
+      if (!names.empty()) std::printf("  %-5s no device: %s\n", std::string(engine::to_string(hand)).c_str(), names.c_str());
+    }
+    std::printf("Waiting for the session to be FOCUSED and the devices' gates to ramp in...\n");
+    std::fflush(stdout);
+  }
+  void operator()(const engine::XrProbeHapticsReady& r) const {
+    std::printf("FOCUSED after %.2f s, gates %s after %.2f s more.\n", r.waited_for_focus_s,
+                r.all_gates_active ? "active" : "NOT ALL ACTIVE", r.waited_for_gates_s);
+    std::printf("Pressing each with %.2f N (+Y, fingertip frame) for 0.3 s, then releasing:\n",
+                engine::xr_probe_haptics_press_n());
     std::fflush(stdout);
   }
   void operator()(const engine::XrProbeSummary& s) const {
@@ -181,10 +196,13 @@ int run_haptics_check(const engine::XrProbeOptions& options, const ProbeArgs& a)
   }
   int failed = 0;
   for (const auto& f : *result) {
-    const std::string released =
-        f.released_after_s ? fmt::format("released after {:.0f} ms", *f.released_after_s * 1e3) : "NOT released within 0.2 s";
-    std::printf("  %-5s %-6s commanded %.2f N, measured %.2f N, %s: %s\n", std::string(engine::to_string(f.hand)).c_str(),
-                f.finger.c_str(), f.peak_commanded_n, f.peak_measured_n, released.c_str(), f.passed() ? "ok" : "FAILED");
+    const auto after = [](const std::optional<double>& s) {
+      return s ? fmt::format("after {:.0f} ms", *s * 1e3) : std::string("NOT within 0.2 s");
+    };
+    std::printf("  %-5s %-6s commanded %.2f N, measured %.2f N, released %s (measured below 0.01 N %s): %s\n",
+                std::string(engine::to_string(f.hand)).c_str(), f.finger.c_str(), f.peak_commanded_n,
+                f.peak_measured_n, after(f.released_after_s).c_str(), after(f.measured_released_after_s).c_str(),
+                f.passed() ? "ok" : "FAILED");
     failed += !f.passed();
   }
   if (failed) {
@@ -266,9 +284,11 @@ void add_xr_probe_command(CLI::App& app, int& exit_code) {
                 "Also enable XR_EXT_hand_tracking_data_source when offered, and report each hand's data source "
                 "(Debian's 1.0.20 core_validation layer rejects this extension's structs)");
   cmd->add_flag("--haptics", args->haptics,
-                "Check the fingertip devices behind XR_PROPRIO_fingertip_haptics instead of the hands: list them, "
-                "press each with 0.5 N for 0.3 s and report what the layer commanded, what the device measured and "
-                "whether the force was released (exit 3 if a device failed, 2 without the extension or devices)");
+                "Check the fingertip devices behind XR_PROPRIO_fingertip_haptics instead of the hands: list both "
+                "hands' devices, wait for the session to be FOCUSED, press each with 0.5 N (+Y in the fingertip "
+                "frame) for 0.3 s and report the peak force the layer commanded and the device measured, and whether "
+                "each fell below 0.01 N within 0.2 s (exit 3 if a device failed, 2 without the extension or devices, "
+                "1 on any other error such as no focus)");
   cmd->callback([args, &exit_code] { exit_code = run_xr_probe(*args); });
 }
 

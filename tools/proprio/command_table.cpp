@@ -148,8 +148,13 @@ constexpr CommandInfo kCommands[] = {
      "with its XrResult); "
      "2 XR_EXT_hand_tracking not offered, or supportsHandTracking false; 3 the run completed without a failed "
      "call but no hand was ever active.\n"
-     "--haptics checks the fingertip devices instead (XR_PROPRIO_fingertip_haptics): 0 every device pressed and "
-     "released; 2 the extension is not offered or the layer has no [haptics] table; 3 a device failed its press.",
+     "--haptics checks the fingertip devices instead (XR_PROPRIO_fingertip_haptics): it lists both hands' devices, "
+     "waits for the session to be FOCUSED (at most 5 s; the layer drives devices only then) and for the gates to "
+     "ramp in, presses each present finger with 0.5 N (+Y, fingertip frame) for 0.3 s and reports the peak "
+     "commanded and measured force and whether both fell below 0.01 N within 0.2 s of the last submission. Exit: "
+     "0 every device pressed and released; 2 the extension is not offered or the layer has no (valid) [haptics] "
+     "table; 3 a device failed its press (measured under 0.1 N, commanded under 0.4 N, or not released); 1 any "
+     "other error, including a session never FOCUSED or one that lost focus during the presses.",
      Family::engine, false},
 #endif
 };

@@ -748,7 +748,8 @@ LoopEnd Probe::run_frames() {
     }
     bool keep_going = true;
     if (hooks_.frame) {
-      detail::XrProbeFrame frame{t, std::chrono::duration<double>(clock::now() - start).count(), session_, space_, {}};
+      detail::XrProbeFrame frame{t, std::chrono::duration<double>(clock::now() - start).count(), session_, space_, {},
+                                 state_};
       for (const auto& h : hands_) frame.hands.push_back({h.which, h.active, h.joints.data()});
       keep_going = hooks_.frame(frame);
     }

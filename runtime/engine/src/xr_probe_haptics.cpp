@@ -1,10 +1,12 @@
 // `proprio xr-probe --haptics` (xr_probe.hpp): checks a fingertip-haptics setup
 // end to end through the system's loader, as any app sees it. It enables
-// XR_PROPRIO_fingertip_haptics, lists each hand's devices, then presses each
-// present finger in turn (0.5 N on the pad, in the fingertip frame, submitted
-// every frame for 0.3 s) and reads what the layer commanded and what the
-// device measured, and whether the force was gone 0.2 s after the last
-// submission. It runs on the probe's own session and frame loop (hooks).
+// XR_PROPRIO_fingertip_haptics, lists each hand's devices, waits for the
+// session to be FOCUSED (the layer drives the devices only then) and for the
+// gates to ramp in, then presses each present finger in turn (0.5 N on the
+// pad, +Y in the fingertip frame, baseSpace XR_NULL_HANDLE, submitted every
+// frame for 0.3 s) and reads what the layer commanded and what the device
+// measured, and whether each was gone within 0.2 s of the last submission.
+// It runs on the probe's own session and frame loop (hooks).
 #define XR_USE_TIMESPEC
 #include <time.h>
 // clang-format off
@@ -28,9 +30,11 @@ namespace proprio::engine {
 namespace {
 
 constexpr double kPressN = 0.5;
-constexpr double kRampInS = 0.6;   // the gates ramp in over 0.4 s once the session is focused
+constexpr double kFocusWaitS = 5.0;  // from the first frame to FOCUSED, at most
+constexpr double kGateWaitS = 2.0;   // from focus to every gate ACTIVE (a ramp-in is 0.4 s), at most
 constexpr double kPressS = 0.3;
 constexpr double kReleaseS = 0.2;
+constexpr float kReleasedN = 0.01f;
 constexpr const char* kFingerNames[] = {"thumb", "index", "middle", "ring", "little"};
 
 class HapticsCheck {
@@ -84,8 +88,9 @@ class HapticsCheck {
     }
     if (!fp.supportsFingertipHaptics) {
       return make_error(Errc::unsupported,
-                        "the layer has no fingertip devices: add a [haptics] table to its configuration "
-                        "(docs/openxr-layer.md, 'proprio layer status')");
+                        "the layer has no fingertip devices (supportsFingertipHaptics is false): its configuration "
+                        "has no [haptics] table, or one it refused (its log says why; check with 'proprio layer "
+                        "status', docs/openxr-layer.md)");
     }
     return {};
   }
@@ -100,6 +105,7 @@ class HapticsCheck {
                                     xr_result_name(r)));
     }
     fingers_.clear();
+    absent_.clear();
     for (XrHandEXT hand : {XR_HAND_LEFT_EXT, XR_HAND_RIGHT_EXT}) {
       XrFingertipHapticsPropertiesPROPRIO p{XR_TYPE_FINGERTIP_HAPTICS_PROPERTIES_PROPRIO};
       if (const XrResult r = properties_(haptics_, hand, &p); XR_FAILED(r)) {
@@ -107,9 +113,13 @@ class HapticsCheck {
       }
       for (std::size_t f = 0; f < XR_FINGERTIP_COUNT_PROPRIO; ++f) {
         const XrFingertipDevicePropertiesPROPRIO& d = p.fingers[f];
-        if (!d.present) continue;
+        const XrProbeHand which = hand == XR_HAND_LEFT_EXT ? XrProbeHand::left : XrProbeHand::right;
+        if (!d.present) {
+          absent_.emplace_back(which, kFingerNames[f]);
+          continue;
+        }
         XrProbeHapticsFinger out;
-        out.hand = hand == XR_HAND_LEFT_EXT ? XrProbeHand::left : XrProbeHand::right;
+        out.hand = which;
         out.finger = kFingerNames[f];
         out.finger_index = static_cast<int>(f);
         out.device = d.deviceName;
@@ -121,19 +131,28 @@ class HapticsCheck {
       }
     }
     if (fingers_.empty()) return make_error(Errc::unavailable, "the layer lists no fingertip device on either hand");
-    current_ = 0;
+    first_frame_s_ = focused_s_ = start_s_ = -1.0;
     return {};
   }
 
-  // Ramp-in, then per finger: press, release; false when every finger is done.
+  // Waits for focus and the gates, then per finger: press, release; false
+  // when every finger is done or the check failed.
   bool on_frame(const detail::XrProbeFrame& frame) {
     if (haptics_ == XR_NULL_HANDLE || failure_) return false;
-    if (start_s_ < 0.0) {
-      start_s_ = frame.t_s;
-      if (report_) report_(XrProbeHapticsDevices{fingers_});  // after the probe has said which session runs
+    if (first_frame_s_ < 0.0) {
+      first_frame_s_ = frame.t_s;
+      if (report_) report_(XrProbeHapticsDevices{fingers_, absent_});  // after the probe has said which session runs
     }
-    const double t = frame.t_s - start_s_ - kRampInS;
-    if (t < 0.0) return true;
+    const bool focused = frame.state == XR_SESSION_STATE_FOCUSED;
+    if (start_s_ < 0.0) return wait_until_ready(frame, focused);
+    if (!focused) {
+      failure_ = make_error(Errc::unavailable,
+                            fmt::format("the session lost input focus during the presses (it is {} now): the layer "
+                                        "drives the fingertip devices only while the app is FOCUSED",
+                                        xr_session_state_name(frame.state)));
+      return false;
+    }
+    const double t = frame.t_s - start_s_;
     const double slot = kPressS + kReleaseS;
     const auto finger = static_cast<std::size_t>(t / slot);
     if (finger >= fingers_.size()) {
@@ -142,19 +161,19 @@ class HapticsCheck {
     }
     XrProbeHapticsFinger& f = fingers_[finger];
     const XrHandEXT hand = f.hand == XrProbeHand::left ? XR_HAND_LEFT_EXT : XR_HAND_RIGHT_EXT;
-    const double in_slot = t - static_cast<double>(finger) * slot;
-    const bool pressing = in_slot < kPressS;
-    XrFingertipForcesPROPRIO forces{XR_TYPE_FINGERTIP_FORCES_PROPRIO};
-    forces.hand = hand;
-    if (pressing) forces.forces[f.finger_index] = {0.0f, static_cast<float>(kPressN), 0.0f};
+    const bool pressing = t - static_cast<double>(finger) * slot < kPressS;
     // Release: nothing submitted, so the layer's fade to zero is what is checked.
-    if (pressing || current_ != finger) {
+    if (pressing) {
+      XrFingertipForcesPROPRIO forces{XR_TYPE_FINGERTIP_FORCES_PROPRIO};
+      forces.hand = hand;
+      forces.baseSpace = XR_NULL_HANDLE;  // the fingertip frames
+      forces.forces[f.finger_index] = {0.0f, static_cast<float>(kPressN), 0.0f};
       if (const XrResult r = apply_(haptics_, &forces); XR_FAILED(r)) {
         failure_ = make_error(Errc::io_error, fmt::format("xrApplyFingertipForcesPROPRIO: {}", xr_result_name(r)));
         return false;
       }
+      last_submit_s_ = frame.t_s;
     }
-    current_ = finger;
     XrFingertipHapticsStatePROPRIO s{XR_TYPE_FINGERTIP_HAPTICS_STATE_PROPRIO};
     if (const XrResult r = state_(haptics_, hand, &s); XR_FAILED(r)) {
       failure_ = make_error(Errc::io_error, fmt::format("xrGetFingertipHapticsStatePROPRIO: {}", xr_result_name(r)));
@@ -163,9 +182,55 @@ class HapticsCheck {
     const XrFingertipStatePROPRIO& st = s.fingers[f.finger_index];
     f.peak_commanded_n = std::max(f.peak_commanded_n, static_cast<double>(st.commandedForce.y));
     f.peak_measured_n = std::max(f.peak_measured_n, static_cast<double>(st.measuredForce.y));
-    if (!pressing && !f.released_after_s && std::abs(st.commandedForce.y) < 0.01f) {
-      f.released_after_s = in_slot - kPressS;
+    if (!pressing) {
+      const double since_last = frame.t_s - last_submit_s_;
+      if (!f.released_after_s && std::abs(st.commandedForce.y) < kReleasedN) f.released_after_s = since_last;
+      if (!f.measured_released_after_s && std::abs(st.measuredForce.y) < kReleasedN) {
+        f.measured_released_after_s = since_last;
+      }
     }
+    return true;
+  }
+
+  // Before the presses: FOCUSED (within kFocusWaitS of the first frame), then
+  // every present finger's gate ACTIVE (or kGateWaitS gone: the presses go
+  // ahead and say what each device did).
+  bool wait_until_ready(const detail::XrProbeFrame& frame, bool focused) {
+    if (!focused) {
+      if (focused_s_ >= 0.0) {
+        failure_ = make_error(Errc::unavailable,
+                              fmt::format("the session lost input focus before the presses (it is {} now): the "
+                                          "layer drives the fingertip devices only while the app is FOCUSED",
+                                          xr_session_state_name(frame.state)));
+        return false;
+      }
+      if (frame.t_s - first_frame_s_ > kFocusWaitS) {
+        failure_ = make_error(Errc::unavailable,
+                              fmt::format("the session did not become FOCUSED within {:.0f} s (it stayed {}): the "
+                                          "layer drives the fingertip devices only while the app has input focus; "
+                                          "is another app or the runtime's own menu in front?",
+                                          kFocusWaitS, xr_session_state_name(frame.state)));
+        return false;
+      }
+      return true;
+    }
+    if (focused_s_ < 0.0) focused_s_ = frame.t_s;
+    bool all_active = true;
+    for (XrHandEXT hand : {XR_HAND_LEFT_EXT, XR_HAND_RIGHT_EXT}) {
+      XrFingertipHapticsStatePROPRIO s{XR_TYPE_FINGERTIP_HAPTICS_STATE_PROPRIO};
+      if (const XrResult r = state_(haptics_, hand, &s); XR_FAILED(r)) {
+        failure_ = make_error(Errc::io_error, fmt::format("xrGetFingertipHapticsStatePROPRIO: {}", xr_result_name(r)));
+        return false;
+      }
+      for (const XrProbeHapticsFinger& f : fingers_) {
+        if ((f.hand == XrProbeHand::left) != (hand == XR_HAND_LEFT_EXT)) continue;
+        all_active = all_active && s.fingers[f.finger_index].gateState == XR_FINGERTIP_GATE_STATE_ACTIVE_PROPRIO;
+      }
+    }
+    const double waited = frame.t_s - focused_s_;
+    if (!all_active && waited < kGateWaitS) return true;
+    start_s_ = frame.t_s;
+    if (report_) report_(XrProbeHapticsReady{focused_s_ - first_frame_s_, waited, all_active});
     return true;
   }
 
@@ -182,8 +247,11 @@ class HapticsCheck {
   PFN_xrGetFingertipHapticsStatePROPRIO state_ = nullptr;
   XrFingertipHapticsPROPRIO haptics_ = XR_NULL_HANDLE;
   std::vector<XrProbeHapticsFinger> fingers_;
-  std::size_t current_ = 0;
-  double start_s_ = -1.0;
+  std::vector<std::pair<XrProbeHand, std::string>> absent_;
+  double first_frame_s_ = -1.0;  // the frame loop's first frame
+  double focused_s_ = -1.0;      // the first FOCUSED frame
+  double start_s_ = -1.0;        // the presses' start
+  double last_submit_s_ = 0.0;
   bool finished_ = false;
   std::optional<Error> failure_;
 };
@@ -191,7 +259,8 @@ class HapticsCheck {
 }  // namespace
 
 bool XrProbeHapticsFinger::passed() const {
-  return connected && peak_commanded_n > 0.8 * kPressN && peak_measured_n > 0.1 && released_after_s.has_value();
+  return connected && peak_commanded_n > 0.8 * kPressN && peak_measured_n > 0.1 && released_after_s.has_value() &&
+         measured_released_after_s.has_value();
 }
 
 double xr_probe_haptics_press_n() { return kPressN; }
@@ -200,8 +269,9 @@ Result<std::vector<XrProbeHapticsFinger>> run_xr_probe_haptics(const XrProbeOpti
                                                                const XrProbeReport& report) {
   HapticsCheck check(report);
   XrProbeOptions probe = options;
-  // Every present finger gets its slot; the duration only bounds the run (up to 10 devices).
-  probe.duration_s = std::max(options.duration_s, kRampInS + 10 * (kPressS + kReleaseS) + 2.0);
+  // Every present finger gets its slot; the duration only bounds the run (the
+  // waits, up to 10 devices, and a second to spare).
+  probe.duration_s = std::max(options.duration_s, kFocusWaitS + kGateWaitS + 10 * (kPressS + kReleaseS) + 1.0);
   auto summary = detail::run_xr_probe_hooked(probe, report, check.hooks());
   if (check.failure()) return *check.failure();
   if (!summary) return summary.error();

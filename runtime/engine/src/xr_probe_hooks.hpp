@@ -28,6 +28,9 @@ struct XrProbeFrame {
   XrSession session = XR_NULL_HANDLE;
   XrSpace space = XR_NULL_HANDLE;  // the probe's reference space (XrProbeOptions::space)
   std::vector<XrProbeFrameHand> hands;
+  // The session's state from the newest event before this frame (FOCUSED:
+  // the app has input focus; the OpenXR layer drives haptics only then).
+  XrSessionState state = XR_SESSION_STATE_UNKNOWN;
 };
 
 struct XrProbeHooks {

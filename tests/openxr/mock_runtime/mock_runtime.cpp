@@ -712,6 +712,9 @@ struct SessionState {
   uint64_t projection_layers = 0;
   uint32_t frames_captured = 0;
   uint32_t exit_after_frames = 0;  // 0: never
+  // PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES: after this many ended frames
+  // the session goes FOCUSED -> VISIBLE and stays (0: begin stops at VISIBLE).
+  std::optional<uint32_t> unfocus_after_frames;
   // PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS=1 on a headless session: frames are
   // refused as Monado refuses them (see xrWaitFrame).
   bool monado_headless = false;
@@ -1507,6 +1510,7 @@ XrResult xrCreateSession(XrInstance instance, const XrSessionCreateInfo* info, X
   session_state.instance = instance_id;
   session_state.vulkan = std::move(vulkan);
   session_state.exit_after_frames = env_uint("PROPRIO_MOCK_RUNTIME_EXIT_AFTER_FRAMES", 0).value_or(0);
+  session_state.unfocus_after_frames = env_uint("PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES", 0);
   session_state.monado_headless =
       session_state.vulkan == nullptr && env_is_one("PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS");
   if (const char* dir = std::getenv("PROPRIO_MOCK_RUNTIME_CAPTURE_DIR")) session_state.capture_dir = dir;
@@ -1627,7 +1631,7 @@ XrResult xrBeginSession(XrSession session, const XrSessionBeginInfo* info) {
   state->frame_waited = state->frame_begun = false;
   push_state(reg, id_of(session), XR_SESSION_STATE_SYNCHRONIZED);
   push_state(reg, id_of(session), XR_SESSION_STATE_VISIBLE);
-  push_state(reg, id_of(session), XR_SESSION_STATE_FOCUSED);
+  if (state->unfocus_after_frames != std::optional<uint32_t>(0)) push_state(reg, id_of(session), XR_SESSION_STATE_FOCUSED);
   return XR_SUCCESS;
 }
 
@@ -1751,6 +1755,10 @@ XrResult xrEndFrame(XrSession session, const XrFrameEndInfo* info) {
   state->frame_begun = false;
   ++state->frames_ended;
   state->projection_layers += info->layerCount;
+  if (state->unfocus_after_frames && state->frames_ended == *state->unfocus_after_frames &&
+      state->state == XR_SESSION_STATE_FOCUSED) {
+    push_state(reg, session_id, XR_SESSION_STATE_VISIBLE);
+  }
   if (state->exit_after_frames != 0 && state->frames_ended >= state->exit_after_frames) {
     request_exit_locked(reg, session_id);
   }

@@ -50,6 +50,7 @@ class MockRuntime : public ::testing::Test {
   ScopedEnv controllers_{"PROPRIO_MOCK_RUNTIME_CONTROLLERS", nullptr};
   ScopedEnv trackers_{"PROPRIO_MOCK_RUNTIME_TRACKERS", nullptr};
   ScopedEnv disconnect_{"PROPRIO_MOCK_RUNTIME_DISCONNECT", nullptr};
+  ScopedEnv unfocus_{"PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES", nullptr};
 };
 
 void expect_near(const XrVector3f& a, const XrVector3f& b, float tol = 1e-5f) {
@@ -615,6 +616,45 @@ TEST_F(MockRuntime, ExitsAfterFrames) {
   EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_IDLE, XR_SESSION_STATE_EXITING}));
   EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
   EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+}
+
+// PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES: 0 keeps a begun session at
+// VISIBLE; N takes it from FOCUSED to VISIBLE after the Nth frame, where it
+// stays (an app that lost input focus), and exit still steps down from there.
+TEST_F(MockRuntime, LosesOrNeverGetsFocus) {
+  const auto run = [](const char* value, std::vector<XrSessionState> at_begin, int unfocus_frame) {
+    ScopedEnv unfocus("PROPRIO_MOCK_RUNTIME_UNFOCUS_AFTER_FRAMES", value);
+    XrInstance instance = XR_NULL_HANDLE;
+    ASSERT_EQ(create_instance({XR_MND_HEADLESS_EXTENSION_NAME}, &instance), XR_SUCCESS);
+    auto session_info = make<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+    session_info.systemId = get_hmd(instance);
+    XrSession session = XR_NULL_HANDLE;
+    ASSERT_EQ(xrCreateSession(instance, &session_info, &session), XR_SUCCESS);
+    drain_states(instance);
+    auto begin_info = make<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
+    begin_info.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+    ASSERT_EQ(xrBeginSession(session, &begin_info), XR_SUCCESS);
+    EXPECT_EQ(drain_states(instance), at_begin) << value;
+    for (int frame = 1; frame <= 5; ++frame) {
+      auto frame_state = make<XrFrameState>(XR_TYPE_FRAME_STATE);
+      ASSERT_EQ(xrWaitFrame(session, nullptr, &frame_state), XR_SUCCESS);
+      ASSERT_EQ(xrBeginFrame(session, nullptr), XR_SUCCESS);
+      auto end_info = make<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+      end_info.displayTime = frame_state.predictedDisplayTime;
+      end_info.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+      ASSERT_EQ(xrEndFrame(session, &end_info), XR_SUCCESS);
+      EXPECT_EQ(drain_states(instance),
+                frame == unfocus_frame ? std::vector{XR_SESSION_STATE_VISIBLE} : std::vector<XrSessionState>{})
+          << value << ", frame " << frame;
+    }
+    ASSERT_EQ(xrRequestExitSession(session), XR_SUCCESS);
+    EXPECT_EQ(drain_states(instance), (std::vector{XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_STOPPING}));
+    ASSERT_EQ(xrEndSession(session), XR_SUCCESS);
+    EXPECT_EQ(xrDestroySession(session), XR_SUCCESS);
+    EXPECT_EQ(xrDestroyInstance(instance), XR_SUCCESS);
+  };
+  run("0", {XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_VISIBLE}, -1);
+  run("3", {XR_SESSION_STATE_SYNCHRONIZED, XR_SESSION_STATE_VISIBLE, XR_SESSION_STATE_FOCUSED}, 3);
 }
 
 // PROPRIO_MOCK_RUNTIME_MONADO_HEADLESS=1: a headless session refuses frames

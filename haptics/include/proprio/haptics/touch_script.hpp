@@ -58,7 +58,7 @@ struct CylinderPinchOptions {
   double squeeze_m = 0.006;
 };
 struct CylinderPinch {
-  HandAngles open{};    // about 7 mm of clearance either side
+  HandAngles open{};    // the tips 15 mm further apart than touching both sides
   HandAngles closed{};  // both tracked tips squeeze_m inside the surface
   Pose T_world_wrist_start;  // with `open`: the thumb 3 mm off the surface, touching nothing
   Pose T_world_wrist;        // with `closed`: the pinch centred on the axis

@@ -21,6 +21,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -151,22 +152,34 @@ struct XrProbeHapticsFinger {
   bool connected = false;
   std::uint32_t force_dofs = 0;
   double max_normal_n = 0.0, max_shear_n = 0.0;
-  // The press (xr_probe_haptics_press_n() on the pad for 0.3 s): the largest
-  // normal force the layer commanded and the device measured, and how long
-  // after the last submission the command was below 0.01 N (none: not within 0.2 s).
+  // The press (xr_probe_haptics_press_n() on the pad, +Y of the fingertip
+  // frame, submitted every frame for 0.3 s): the largest commandedForce.y the
+  // layer let through and measuredForce.y the device reported, and how long
+  // after the last submission each was below 0.01 N (none: not within 0.2 s).
   double peak_commanded_n = 0.0, peak_measured_n = 0.0;
-  std::optional<double> released_after_s;
-  // Connected, commanded at least 80 % of the press, measured over 0.1 N, released.
+  std::optional<double> released_after_s;           // commandedForce.y
+  std::optional<double> measured_released_after_s;  // measuredForce.y
+  // Connected, commanded at least 80 % of the press, measured over 0.1 N,
+  // both released within 0.2 s.
   bool passed() const;
 };
 double xr_probe_haptics_press_n();
 struct XrProbeHapticsDevices {  // once the haptics object exists: every present finger, before the presses
   std::vector<XrProbeHapticsFinger> fingers;
+  // Fingers without a device (XrFingertipDevicePropertiesPROPRIO::present false), per hand.
+  std::vector<std::pair<XrProbeHand, std::string>> absent;
+};
+// --haptics: waiting for the session to be FOCUSED and every device's gate to
+// ramp in, before the presses (reported once, when the wait is over).
+struct XrProbeHapticsReady {
+  double waited_for_focus_s = 0.0;  // from the first frame
+  double waited_for_gates_s = 0.0;  // from focus
+  bool all_gates_active = true;     // false: the wait timed out; the presses go ahead
 };
 
 using XrProbeEvent = std::variant<XrProbeDataSourceNotOffered, XrProbeRuntime, XrProbeSystem, XrProbeSessionStarted,
                                   XrProbeHeadlessRefused, XrProbeZeroDisplayTime, XrProbeSecond, XrProbeSummary,
-                                  XrProbeHapticsDevices>;
+                                  XrProbeHapticsDevices, XrProbeHapticsReady>;
 using XrProbeReport = std::function<void(const XrProbeEvent&)>;
 
 // Error codes of run_xr_probe: Errc::unsupported means only "no hand tracking"

@@ -137,4 +137,20 @@ Result<CylinderPinch> pinch_upright_cylinder(const HandModel& model, Handedness 
   return out;
 }
 
+Result<std::array<CylinderPinch, 2>> pinch_peg_with_both_hands(const HandModel& model, const HapticScene& scene) {
+  const SceneObject* peg = scene.find("peg");
+  if (peg == nullptr) return make_error(Errc::not_found, "the peg-in-hole scene has no peg");
+  std::array<CylinderPinch, 2> out;
+  for (std::size_t h = 0; h < 2; ++h) {
+    CylinderPinchOptions o;
+    o.radius_m = peg->radius_m;
+    o.p_axis_in_world = peg->T_world_object.p + Vec3(0.0, h == 0 ? -0.035 : 0.03, 0.0);
+    o.approach_from = Vec3(h == 0 ? -1.0 : 1.0, 0.0, 0.0);
+    auto p = pinch_upright_cylinder(model, h == 0 ? Handedness::left : Handedness::right, o);
+    if (!p) return p.error();
+    out[h] = *p;
+  }
+  return out;
+}
+
 }  // namespace proprio::haptics

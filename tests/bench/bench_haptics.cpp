@@ -112,27 +112,19 @@ BENCHMARK(BM_ServoTickPegInHolePressing)->Unit(benchmark::kMicrosecond);
 void BM_ServoTickTwoHandsPinchingPeg(benchmark::State& state) {
   const HandModel hand(*HandShape::from_measurements(0.19, 0.10));
   const HapticScene scene = HapticScene::peg_in_hole();
-  const SceneObject& peg = *scene.find("peg");
   const ProxyHandSpec specs[] = {{hand, Handedness::left}, {hand, Handedness::right}};
   auto world = ContactSimulation::create(specs, scene);
   if (!world) {
     state.SkipWithError(world.error().message.c_str());
     return;
   }
-  std::array<CylinderPinch, 2> pinch;
-  for (std::size_t h = 0; h < 2; ++h) {
-    CylinderPinchOptions o;
-    o.radius_m = peg.radius_m;
-    o.p_axis_in_world = peg.T_world_object.p + Vec3(0.0, h == 0 ? -0.035 : 0.03, 0.0);
-    o.approach_from = Vec3(h == 0 ? -1.0 : 1.0, 0.0, 0.0);
-    auto p = pinch_upright_cylinder(hand, h == 0 ? Handedness::left : Handedness::right, o);
-    if (!p) {
-      state.SkipWithError(p.error().message.c_str());
-      return;
-    }
-    pinch[h] = *p;
-    world->reset_hand(pinch[h].T_world_wrist_start, pinch[h].open, h);
+  auto pinches = pinch_peg_with_both_hands(hand, scene);
+  if (!pinches) {
+    state.SkipWithError(pinches.error().message.c_str());
+    return;
   }
+  const std::array<CylinderPinch, 2>& pinch = *pinches;
+  for (std::size_t h = 0; h < 2; ++h) world->reset_hand(pinch[h].T_world_wrist_start, pinch[h].open, h);
   auto device = load_device_model(data_path("haptics/platform_3dof.toml"));
   if (!device) {
     state.SkipWithError(device.error().message.c_str());

@@ -271,27 +271,6 @@ Quantiles quantiles(std::vector<double> v) {
   return q;
 }
 
-// Both hands pinching the standing peg (issue 29's servo target), thumb and
-// index of each: the left hand from -x 3.5 cm below the peg's middle, the
-// right from +x 3 cm above it (pinch_upright_cylinder, as
-// BM_ServoTickTwoHandsPinchingPeg). The proxies never overlap, and would not
-// collide if they did.
-Result<std::array<CylinderPinch, 2>> pinches_on_peg(const HandModel& model, const HapticScene& scene) {
-  const SceneObject* peg = scene.find("peg");
-  if (peg == nullptr) return make_error(Errc::not_found, "the peg-in-hole scene has no peg");
-  std::array<CylinderPinch, 2> out;
-  for (std::size_t h = 0; h < 2; ++h) {
-    CylinderPinchOptions o;
-    o.radius_m = peg->radius_m;
-    o.p_axis_in_world = peg->T_world_object.p + Vec3(0.0, h == 0 ? -0.035 : 0.03, 0.0);
-    o.approach_from = Vec3(h == 0 ? -1.0 : 1.0, 0.0, 0.0);
-    auto p = pinch_upright_cylinder(model, h == 0 ? Handedness::left : Handedness::right, o);
-    if (!p) return p.error();
-    out[h] = *p;
-  }
-  return out;
-}
-
 int run_bench(const BenchArgs& a) {
   const HandModel hand = cli_hand(0.19, 0.09);
   auto scene = make_scene("peg-in-hole");
@@ -356,7 +335,7 @@ int run_bench(const BenchArgs& a) {
   const ProxyHandSpec two[] = {{both_hand, Handedness::left}, {both_hand, Handedness::right}};
   auto world = ContactSimulation::create(two, scene->scene);
   if (!world) return report_error(world.error());
-  auto pinch = pinches_on_peg(both_hand, scene->scene);
+  auto pinch = pinch_peg_with_both_hands(both_hand, scene->scene);
   if (!pinch) return report_error(pinch.error());
   for (std::size_t h = 0; h < 2; ++h) world->reset_hand((*pinch)[h].T_world_wrist_start, (*pinch)[h].open, h);
   std::vector<ServoChannel> six;

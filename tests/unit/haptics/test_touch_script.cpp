@@ -78,21 +78,13 @@ TEST(CylinderPinch, RefusesWhatTheHandCannotSpanOrBadInput) {
 TEST(CylinderPinch, TwoHandsPinchThePegInOneWorld) {
   const HandModel m = bench_hand();
   const HapticScene scene = HapticScene::peg_in_hole();
-  const SceneObject& peg = *scene.find("peg");
   const ProxyHandSpec specs[] = {{m, Handedness::left}, {m, Handedness::right}};
   auto sim = ContactSimulation::create(specs, scene);
   ASSERT_TRUE(sim) << sim.error().message;
-  std::array<CylinderPinch, 2> pinch;
-  for (std::size_t h = 0; h < 2; ++h) {
-    CylinderPinchOptions o;
-    o.radius_m = peg.radius_m;
-    o.p_axis_in_world = peg.T_world_object.p + Vec3(0.0, h == 0 ? -0.035 : 0.03, 0.0);
-    o.approach_from = Vec3(h == 0 ? -1.0 : 1.0, 0.0, 0.0);
-    auto p = pinch_upright_cylinder(m, h == 0 ? Handedness::left : Handedness::right, o);
-    ASSERT_TRUE(p) << p.error().message;
-    pinch[h] = *p;
-    sim->reset_hand(p->T_world_wrist_start, p->open, h);
-  }
+  auto pinches = pinch_peg_with_both_hands(m, scene);
+  ASSERT_TRUE(pinches) << pinches.error().message;
+  const std::array<CylinderPinch, 2>& pinch = *pinches;
+  for (std::size_t h = 0; h < 2; ++h) sim->reset_hand(pinch[h].T_world_wrist_start, pinch[h].open, h);
   const Pose peg_before = *sim->object_pose("peg");
   double least_pad_n = 1e9;
   for (int i = 0; i < 2500; ++i) {

@@ -7,8 +7,11 @@
 //
 // Also a static thumb-index pinch of an upright cylinder (pinch_upright_cylinder):
 // the two-hand servo benchmark's grasp of the peg.
+#include <array>
+
 #include "proprio/core/hand_model.hpp"
 #include "proprio/core/result.hpp"
+#include "proprio/haptics/scene.hpp"
 
 namespace proprio::haptics {
 
@@ -66,5 +69,11 @@ struct CylinderPinch {
 // Errc::invalid_argument when the hand cannot span the cylinder (or closes
 // past it with no room to squeeze) in this posture.
 Result<CylinderPinch> pinch_upright_cylinder(const HandModel& model, Handedness hand, const CylinderPinchOptions& o);
+
+// Both hands pinching the standing peg of `scene` (the two-hand servo case of
+// `bench haptics` and BM_ServoTickTwoHandsPinchingPeg), left then right: the
+// left hand from -x 3.5 cm below the peg's middle, the right from +x 3 cm
+// above it. Errc::not_found when the scene has no object named "peg".
+Result<std::array<CylinderPinch, 2>> pinch_peg_with_both_hands(const HandModel& model, const HapticScene& scene);
 
 }  // namespace proprio::haptics

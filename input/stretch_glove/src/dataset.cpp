@@ -2,7 +2,6 @@
 #include "proprio/core/file_io.hpp"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -11,15 +10,6 @@
 namespace proprio::stretch_glove {
 
 namespace {
-
-static_assert(std::endian::native == std::endian::little || std::endian::native == std::endian::big,
-              "mixed-endian hosts are not supported");
-
-// The header text is padded to this size whatever the row count, so close()
-// can rewrite it in place: the magic (6), version (2), length (2) and the
-// dict fit in 128 bytes for any shape we write, and 64-byte alignment is what
-// numpy itself uses.
-constexpr std::size_t kHeaderBytes = 128;
 
 std::string json_string(std::string_view text) {
   std::string out = "\"";
@@ -61,114 +51,6 @@ Error io_error(const std::filesystem::path& path, const std::string& what) {
 
 }  // namespace
 
-std::string_view npy_descr(NpyType t) noexcept {
-  switch (t) {
-    case NpyType::float32: return "<f4";
-    case NpyType::int32: return "<i4";
-    case NpyType::uint8: return "|u1";
-  }
-  return "?";
-}
-
-// --- NPY ----------------------------------------------------------------------------
-
-std::string NpyWriter::header(std::size_t rows) const {
-  std::string shape = "(" + std::to_string(rows) + ",";
-  for (std::size_t i = 0; i < row_shape_.size(); ++i) shape += (i ? ", " : " ") + std::to_string(row_shape_[i]);
-  shape += ")";
-  std::string dict = "{'descr': '" + std::string(npy_descr(type_)) + "', 'fortran_order': False, 'shape': " + shape + ", }";
-  // Magic, version 1.0, little-endian header length, then the dict padded
-  // with spaces and ended by a newline.
-  std::string h = "\x93NUMPY";
-  h += '\x01';
-  h += '\x00';
-  const std::size_t dict_len = kHeaderBytes - 10;
-  if (dict.size() + 1 > dict_len) return {};  // does not fit the reserved header
-  h += static_cast<char>(dict_len & 0xff);
-  h += static_cast<char>((dict_len >> 8) & 0xff);
-  dict.resize(dict_len - 1, ' ');
-  h += dict;
-  h += '\n';
-  return h;
-}
-
-Result<NpyWriter> NpyWriter::create(const std::filesystem::path& path, NpyType type,
-                                    std::vector<std::size_t> row_shape) {
-  NpyWriter w;
-  w.path_ = path;
-  w.type_ = type;
-  w.row_shape_ = std::move(row_shape);
-  for (auto d : w.row_shape_) w.row_elements_ *= d;
-  if (w.row_elements_ == 0) return make_error(Errc::invalid_argument, "an .npy row needs at least one element");
-  if (w.header(std::size_t{1} << 62).size() != kHeaderBytes) {
-    return make_error(Errc::invalid_argument, "the .npy shape is too long for the reserved header");
-  }
-  if (auto st = check_output_path(path, "dataset array"); !st) return st.error();
-  w.out_ = std::make_unique<std::ofstream>(path, std::ios::binary | std::ios::trunc);
-  if (!*w.out_) return io_error(path, "cannot be created; check the folder exists and is writable");
-  const std::string h = w.header(0);
-  w.out_->write(h.data(), static_cast<std::streamsize>(h.size()));
-  if (!*w.out_) return io_error(path, "writing the header failed");
-  return w;
-}
-
-NpyWriter::~NpyWriter() {
-  if (out_) (void)close();
-}
-
-Status NpyWriter::append_bytes(const void* data, std::size_t count, std::size_t element_size, NpyType type) {
-  if (!out_) return io_error(path_, "is already closed");
-  if (type != type_) return make_error(Errc::invalid_argument, "appending the wrong element type to " + path_.string());
-  const auto* bytes = static_cast<const char*>(data);
-  if constexpr (std::endian::native == std::endian::little) {
-    out_->write(bytes, static_cast<std::streamsize>(count * element_size));
-  } else {
-    std::vector<char> swapped(bytes, bytes + count * element_size);
-    for (std::size_t i = 0; i < count; ++i) std::reverse(swapped.begin() + static_cast<std::ptrdiff_t>(i * element_size),
-                                                         swapped.begin() + static_cast<std::ptrdiff_t>((i + 1) * element_size));
-    out_->write(swapped.data(), static_cast<std::streamsize>(swapped.size()));
-  }
-  if (!*out_) return io_error(path_, "writing failed (disk full?)");
-  pending_elements_ += count;
-  rows_ += pending_elements_ / row_elements_;
-  pending_elements_ %= row_elements_;
-  return {};
-}
-
-Status NpyWriter::append(std::span<const float> v) { return append_bytes(v.data(), v.size(), 4, NpyType::float32); }
-Status NpyWriter::append(std::span<const std::int32_t> v) { return append_bytes(v.data(), v.size(), 4, NpyType::int32); }
-Status NpyWriter::append(std::span<const std::uint8_t> v) { return append_bytes(v.data(), v.size(), 1, NpyType::uint8); }
-
-Status NpyWriter::close() {
-  if (!out_) return {};
-  auto out = std::move(out_);
-  if (pending_elements_ != 0) {
-    return make_error(Errc::invalid_argument, path_.string() + ": the data ended part-way through a row (" +
-                                                  std::to_string(pending_elements_) + " of " +
-                                                  std::to_string(row_elements_) + " values)");
-  }
-  const std::string h = header(rows_);
-  out->seekp(0);
-  out->write(h.data(), static_cast<std::streamsize>(h.size()));
-  out->flush();
-  if (!*out) return io_error(path_, "finishing the header failed");
-  return {};
-}
-
-Status write_npy(const std::filesystem::path& path, std::span<const float> values, std::vector<std::size_t> shape) {
-  if (shape.empty()) return make_error(Errc::invalid_argument, "an .npy array needs a shape");
-  std::size_t total = 1;
-  for (auto d : shape) total *= d;
-  if (total != values.size()) {
-    return make_error(Errc::invalid_argument, path.string() + ": shape does not match the number of values");
-  }
-  // A 1-D array is rows of one element: NpyWriter writes (N,) for an empty row shape.
-  std::vector<std::size_t> row_shape(shape.begin() + 1, shape.end());
-  auto w = NpyWriter::create(path, NpyType::float32, row_shape);
-  if (!w) return w.error();
-  if (auto st = w->append(values); !st) return st;
-  return w->close();
-}
 
 // --- dataset -----------------------------------------------------------------------------
 

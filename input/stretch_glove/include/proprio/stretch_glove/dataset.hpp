@@ -28,48 +28,16 @@
 #include <string>
 #include <vector>
 
+#include "proprio/core/npy_file.hpp"
 #include "proprio/core/result.hpp"
 #include "proprio/glove_descriptions/stretch_glove_layout.hpp"
 #include "proprio/stretch_glove/calibration.hpp"
 
 namespace proprio::stretch_glove {
 
-enum class NpyType : std::uint8_t { float32, int32, uint8 };
-std::string_view npy_descr(NpyType t) noexcept;  // "<f4", "<i4", "|u1"
-
-// An .npy file whose first dimension grows as rows are appended; close()
-// writes the final row count into the header (reserved at a fixed size).
-class NpyWriter {
- public:
-  static Result<NpyWriter> create(const std::filesystem::path& path, NpyType type,
-                                  std::vector<std::size_t> row_shape);
-  Status append(std::span<const float> values);
-  Status append(std::span<const std::int32_t> values);
-  Status append(std::span<const std::uint8_t> values);
-  Status close();
-  std::size_t rows() const noexcept { return rows_; }
-  const std::filesystem::path& path() const noexcept { return path_; }
-
-  NpyWriter(NpyWriter&&) = default;
-  NpyWriter& operator=(NpyWriter&&) = default;
-  ~NpyWriter();
-
- private:
-  NpyWriter() = default;
-  Status append_bytes(const void* data, std::size_t count, std::size_t element_size, NpyType type);
-  std::string header(std::size_t rows) const;
-
-  std::filesystem::path path_;
-  std::unique_ptr<std::ofstream> out_;
-  NpyType type_ = NpyType::float32;
-  std::vector<std::size_t> row_shape_;
-  std::size_t row_elements_ = 1;
-  std::size_t rows_ = 0;
-  std::size_t pending_elements_ = 0;  // appended elements not yet making a whole row
-};
-
-// A whole .npy file at once.
-Status write_npy(const std::filesystem::path& path, std::span<const float> values, std::vector<std::size_t> shape);
+using proprio::NpyType;
+using proprio::NpyWriter;
+using proprio::write_npy;
 
 // One session's frames and its calibration.
 struct DatasetSession {

@@ -195,26 +195,38 @@ Result<MeshId> Renderer::upload(const MeshData& mesh) {
 
 Result<MeshId> Renderer::upload_skinned(const SkinnedMeshData& mesh) {
   if (auto s = mesh.validate(); !s) return s.error();
-  if (mesh.indices.empty()) return make_error(Errc::invalid_argument, "mesh '" + mesh.name + "' has no triangles");
-  if (mesh.vertices.size() > options_.max_skinned_vertices) {
+  return upload_cpu_posed(mesh.name, mesh.vertices, mesh.indices, mesh.joint_names.size());
+}
+
+Result<MeshId> Renderer::upload_deforming(const MeshData& mesh) {
+  if (auto s = mesh.validate(); !s) return s.error();
+  std::vector<SkinnedVertex> source(mesh.vertices.size());
+  for (std::size_t i = 0; i < source.size(); ++i) source[i].position = mesh.vertices[i].position;
+  return upload_cpu_posed(mesh.name, std::move(source), mesh.indices, 0);
+}
+
+Result<MeshId> Renderer::upload_cpu_posed(const std::string& name, std::vector<SkinnedVertex> source,
+                                          const std::vector<std::uint32_t>& triangles, std::size_t joint_count) {
+  if (triangles.empty()) return make_error(Errc::invalid_argument, "mesh '" + name + "' has no triangles");
+  if (source.size() > options_.max_skinned_vertices) {
     return make_error(Errc::out_of_range,
-                      fmt::format("skinned mesh '{}' has {} vertices, more than the renderer's {} skinned vertices "
-                                  "per frame (RendererOptions::max_skinned_vertices)",
-                                  mesh.name, mesh.vertices.size(), options_.max_skinned_vertices));
+                      fmt::format("mesh '{}' has {} vertices, more than the renderer's {} skinned and deforming "
+                                  "vertices per frame (RendererOptions::max_skinned_vertices)",
+                                  name, source.size(), options_.max_skinned_vertices));
   }
-  std::vector<std::uint32_t> indices = mesh.indices;
-  for (std::size_t t = 0; t < mesh.indices.size(); t += 3) {
-    indices.insert(indices.end(), {mesh.indices[t], mesh.indices[t + 2], mesh.indices[t + 1]});
+  std::vector<std::uint32_t> indices = triangles;
+  for (std::size_t t = 0; t < triangles.size(); t += 3) {
+    indices.insert(indices.end(), {triangles[t], triangles[t + 2], triangles[t + 1]});
   }
   auto ib = context_.upload_buffer(indices.data(), indices.size() * sizeof(std::uint32_t),
                                    VK_BUFFER_USAGE_INDEX_BUFFER_BIT);
-  if (!ib) return ib.error().with_context("uploading skinned mesh '" + mesh.name + "'");
+  if (!ib) return ib.error().with_context("uploading mesh '" + name + "'");
   GpuMesh gpu;
   gpu.indices = std::move(ib).value();
-  gpu.index_count = static_cast<std::uint32_t>(mesh.indices.size());
+  gpu.index_count = static_cast<std::uint32_t>(triangles.size());
   gpu.skinned = true;
-  gpu.skin_source = mesh.vertices;
-  gpu.joint_count = mesh.joint_names.size();
+  gpu.skin_source = std::move(source);
+  gpu.joint_count = joint_count;
   meshes_.push_back(std::move(gpu));
   return static_cast<MeshId>(meshes_.size() - 1);
 }
@@ -420,8 +432,12 @@ std::size_t Renderer::fill_skinned(const DrawList& draws) {
       ++stats_.skinned_draws_dropped;
       continue;
     }
-    skin_vertices(mesh.skin_source, std::span(draws.skin_matrices).subspan(item.first_matrix, mesh.joint_count),
-                  std::span(out + used, n));
+    if (item.first_posed_vertex != SkinnedDrawItem::kSkinned) {
+      std::copy_n(draws.posed_vertices.begin() + item.first_posed_vertex, n, out + used);
+    } else {
+      skin_vertices(mesh.skin_source, std::span(draws.skin_matrices).subspan(item.first_matrix, mesh.joint_count),
+                    std::span(out + used, n));
+    }
     used += n;
   }
   return used;
@@ -448,6 +464,16 @@ Status Renderer::render(const DrawList& draws, std::span<const View> views, std:
     if (item.mesh >= meshes_.size() || !meshes_[item.mesh].skinned) {
       return make_error(Errc::invalid_argument, fmt::format("render: skinned draw {} names mesh {}, which is not a "
                                                             "skinned mesh (Renderer::upload_skinned)", i, item.mesh));
+    }
+    if (item.first_posed_vertex != SkinnedDrawItem::kSkinned) {
+      if (std::size_t{item.first_posed_vertex} + meshes_[item.mesh].skin_source.size() > draws.posed_vertices.size()) {
+        return make_error(Errc::invalid_argument,
+                          fmt::format("render: deforming draw {} needs posed vertices {} to {}, but the draw list has "
+                                      "{}", i, item.first_posed_vertex,
+                                      std::size_t{item.first_posed_vertex} + meshes_[item.mesh].skin_source.size(),
+                                      draws.posed_vertices.size()));
+      }
+      continue;
     }
     if (item.first_matrix + meshes_[item.mesh].joint_count > draws.skin_matrices.size()) {
       return make_error(Errc::invalid_argument,
@@ -526,8 +552,8 @@ Status Renderer::render(const DrawList& draws, std::span<const View> views, std:
       // A mirrored skin (negative determinant) turns the triangles inside
       // out; the reversed copy keeps their front faces outside, which the
       // lighting's gl_FrontFacing relies on.
-      const bool mirrored =
-          mesh.joint_count > 0 && glm::determinant(glm::mat3(draws.skin_matrices[item.first_matrix])) < 0.0f;
+      const bool mirrored = item.first_posed_vertex == SkinnedDrawItem::kSkinned && mesh.joint_count > 0 &&
+                            glm::determinant(glm::mat3(draws.skin_matrices[item.first_matrix])) < 0.0f;
       vkCmdDrawIndexed(cmd_, mesh.index_count, 1, mirrored ? mesh.index_count : 0, 0, 0);
       skinned_offset += mesh.skin_source.size();
     }

@@ -411,6 +411,54 @@ TEST_F(RenderTest, SkinnedDrawErrorsAreErrorsNotCrashes) {
   EXPECT_FALSE(renderer_->upload_skinned(broken));
 }
 
+// A deforming surface: the caller's vertices are drawn where it puts them,
+// frame after frame, and a draw past the posed vertices is an error.
+TEST_F(RenderTest, DeformingMeshDrawsTheCallersVertices) {
+  MeshData quad;
+  quad.name = "sheet";
+  quad.vertices = {{{-0.05f, -0.05f, 0}, {0, 0, 1}}, {{0.05f, -0.05f, 0}, {0, 0, 1}},
+                   {{0.05f, 0.05f, 0}, {0, 0, 1}},   {{-0.05f, 0.05f, 0}, {0, 0, 1}}};
+  quad.indices = {0, 1, 2, 0, 2, 3};
+  auto mesh = renderer_->upload_deforming(quad);
+  ASSERT_TRUE(mesh) << mesh.error().message;
+  const View view{look_at(Vec3(0, 0, 0.3), Vec3(0, 0, 0)), symmetric_fov(glm::radians(45.0f), 1.0f)};
+  auto lit_pixels_left_and_right = [&](float shift_m) {
+    DrawList draws;
+    SkinnedDrawItem item{*mesh, 0, glm::vec4(1)};
+    item.first_posed_vertex = 0;
+    draws.skinned.push_back(item);
+    for (auto v : quad.vertices) {
+      v.position.x += shift_m;
+      draws.posed_vertices.push_back(v);
+    }
+    const auto images = render_views(draws, std::span(&view, 1), 64, 64);
+    int left = 0, right = 0;
+    for (std::uint32_t y = 0; y < 64; ++y) {
+      for (std::uint32_t x = 0; x < 64; ++x) {
+        if (images[0].at(x, y)[0] > 100) ++(x < 32 ? left : right);
+      }
+    }
+    return std::pair(left, right);
+  };
+  const auto [l0, r0] = lit_pixels_left_and_right(-0.06f);
+  const auto [l1, r1] = lit_pixels_left_and_right(+0.06f);
+  EXPECT_GT(l0, 100);
+  EXPECT_EQ(r0, 0);
+  EXPECT_EQ(l1, 0);
+  EXPECT_GT(r1, 100);
+
+  auto target = OffscreenTarget::create(*renderer_, 16, 16, 1);
+  ASSERT_TRUE(target);
+  DrawList short_list;
+  SkinnedDrawItem item{*mesh, 0, glm::vec4(1)};
+  item.first_posed_vertex = 1;  // needs vertices 1-4, the list has 4
+  short_list.skinned.push_back(item);
+  short_list.posed_vertices = quad.vertices;
+  auto s = renderer_->render(short_list, std::span(&view, 1), (*target)->views());
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.error().message.find("posed vertices"), std::string::npos) << s.error().message;
+}
+
 // The generated right hand drawn in three poses (open, fist, pointing) for
 // each side, tiled as the joint-sphere golden: left hands (mirrored) on top,
 // right below, seen from the back of the hand, fingers up: the right thumb

@@ -36,9 +36,15 @@ struct DrawItem {
 // joint, in the mesh's joint order) start at `first_matrix` in
 // DrawList::skin_matrices. Drawn after the static items, in order.
 struct SkinnedDrawItem {
+  static constexpr std::uint32_t kSkinned = 0xFFFFFFFFu;
   MeshId mesh = 0;
   std::uint32_t first_matrix = 0;
   glm::vec4 color{0.8f, 0.8f, 0.8f, 1.0f};
+  // A deforming surface (a stretch array's mesh, cloth) whose vertices the
+  // caller computes: they are taken, in world space with their normals, from
+  // DrawList::posed_vertices starting here instead of being skinned. Upload
+  // such a mesh with Renderer::upload_deforming.
+  std::uint32_t first_posed_vertex = kSkinned;
 };
 
 // A line or block of text in the overlay, in pixels from the target's
@@ -56,6 +62,7 @@ struct DrawList {
   std::vector<HudText> hud;
   std::vector<SkinnedDrawItem> skinned;
   std::vector<glm::mat4> skin_matrices;
+  std::vector<Vertex> posed_vertices;  // for SkinnedDrawItem::first_posed_vertex
   glm::vec4 clear_color{0.08f, 0.09f, 0.11f, 1.0f};
   // Keeps capacity, so refilling it every frame does not allocate.
   void clear() {
@@ -63,6 +70,7 @@ struct DrawList {
     hud.clear();
     skinned.clear();
     skin_matrices.clear();
+    posed_vertices.clear();
   }
 };
 
@@ -144,6 +152,10 @@ class Renderer {
   // are skinned each frame into a host-visible buffer). Draw it with
   // DrawList::skinned, not as a DrawItem.
   Result<MeshId> upload_skinned(const SkinnedMeshData& mesh);
+  // Uploads the triangles of a mesh whose vertices change every frame; draw
+  // it with a SkinnedDrawItem whose first_posed_vertex is set. `mesh`'s
+  // vertices only fix their count.
+  Result<MeshId> upload_deforming(const MeshData& mesh);
   std::size_t mesh_count() const noexcept;
 
   // Records and submits one frame: views[i] into targets[i]. Returns once
@@ -166,6 +178,9 @@ class Renderer {
   explicit Renderer(VulkanContext& context, RendererOptions options);
   Status init();
   std::uint32_t fill_hud(const DrawList& draws, std::size_t& vertex_count);
+  // The index buffer (triangles, then reversed) of a CPU-posed mesh.
+  Result<MeshId> upload_cpu_posed(const std::string& name, std::vector<SkinnedVertex> source,
+                                  const std::vector<std::uint32_t>& triangles, std::size_t joint_count);
   // Skins every skinned draw that fits into skin_vertices_; returns the vertices written.
   std::size_t fill_skinned(const DrawList& draws);
 

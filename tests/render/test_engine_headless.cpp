@@ -84,6 +84,53 @@ TEST(EngineHeadless, WithoutHapticsTheTrackedHandIsDrawnAsIs) {
   EXPECT_EQ(run.report.peak_fingertip_force_n, 0.0);
 }
 
+// A deforming surface from the frame hook: a square ahead of the eyes that
+// slides from the left half of the view to the right half.
+TEST(EngineHeadless, FrameHookMovesADeformingSurface) {
+  auto scene = Scene::preset("empty");
+  ASSERT_TRUE(scene);
+  AppOptions o;
+  o.output = OutputMode::headless;
+  o.width = 160;
+  o.height = 90;
+  o.stereo = false;
+  o.frames = 2;
+  o.software_renderer = true;
+  o.validation = true;
+  o.hud = false;
+  o.out_dir = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / "engine_surface";
+  std::filesystem::remove_all(o.out_dir);
+  AppInputs in;
+  in.surfaces.push_back({"sheet", {0, 1, 2, 0, 2, 3}, 4, {1, 0.2f, 0.2f, 1}});
+  in.on_frame = [&](FrameContext& c) {
+    ASSERT_EQ(c.surfaces.size(), 0u + (c.frame > 0));
+    c.show_scene = false;
+    const Vec3 ahead = c.T_world_head * Vec3(c.frame == 0 ? -0.08 : 0.08, 0, -0.3);
+    const Mat3 R = c.T_world_head.q.toRotationMatrix();
+    const Vec3 x = R.col(0) * 0.05, y = R.col(1) * 0.05;
+    c.surfaces.assign(1, {ahead - x - y, ahead + x - y, ahead + x + y, ahead - x + y});
+  };
+  auto app = App::create(std::move(*scene), std::move(in), o);
+  ASSERT_TRUE(app) << app.error().message;
+  auto report = (*app)->run();
+  ASSERT_TRUE(report) << report.error().message;
+  ASSERT_EQ(report->images.size(), 2u);
+  auto red_pixels = [](const render::ImageRGBA8& im, std::uint32_t x0, std::uint32_t x1) {
+    int n = 0;
+    for (std::uint32_t y = 0; y < im.height; ++y) {
+      for (std::uint32_t x = x0; x < x1; ++x) n += im.at(x, y)[0] > 200;  // the background is black
+    }
+    return n;
+  };
+  auto first = render::read_png(report->images[0]);
+  auto second = render::read_png(report->images[1]);
+  ASSERT_TRUE(first && second);
+  EXPECT_GT(red_pixels(*first, 0, 80), 100);
+  EXPECT_EQ(red_pixels(*first, 80, 160), 0);
+  EXPECT_EQ(red_pixels(*second, 0, 80), 0);
+  EXPECT_GT(red_pixels(*second, 80, 160), 100);
+}
+
 TEST(EngineHeadless, FrameHookBlacksOutTheSceneDrawsMarkersAndStops) {
   auto scene = Scene::preset("half-cylinder");
   ASSERT_TRUE(scene);

@@ -191,6 +191,7 @@ void App::Impl::compose(render::DrawList& draws, const SceneDrawer& drawer, doub
     if (tracked.active && (!proxy_shown || options.show_tracked_hand)) drawer.append_hand(draws, tracked, proxy_shown);
   }
   for (const auto& m : c.markers) drawer.append_marker(draws, m);
+  for (std::size_t i = 0; i < c.surfaces.size(); ++i) drawer.append_surface(draws, i, c.surfaces[i]);
   if (!c.prompt.empty()) {
     // stb_easy_font glyphs are about 6 px wide at scale 1.
     constexpr float scale = 3.0f;
@@ -251,7 +252,7 @@ Result<AppReport> App::Impl::run_headless() {
   if (!ctx) return ctx.error();
   auto renderer = render::Renderer::create(**ctx);
   if (!renderer) return renderer.error();
-  auto drawer = SceneDrawer::create(**renderer, scene, options, *hand_model);
+  auto drawer = SceneDrawer::create(**renderer, scene, options, *hand_model, inputs.surfaces);
   if (!drawer) return drawer.error();
   const std::uint32_t eyes = options.stereo ? 2 : 1;
   auto target = render::OffscreenTarget::create(**renderer, options.width, options.height, eyes);
@@ -359,7 +360,7 @@ Result<AppReport> App::Impl::run_window() {
   if (!ctx) return ctx.error();
   auto renderer = render::Renderer::create(**ctx);
   if (!renderer) return renderer.error();
-  auto drawer = SceneDrawer::create(**renderer, scene, options, *hand_model);
+  auto drawer = SceneDrawer::create(**renderer, scene, options, *hand_model, inputs.surfaces);
   if (!drawer) return drawer.error();
   auto target = render::WindowTarget::create(**renderer, **window);
   if (!target) return target.error();

@@ -28,8 +28,17 @@ render::MeshData mesh_for(const Entity& e) {
 }  // namespace
 
 Result<SceneDrawer> SceneDrawer::create(render::Renderer& renderer, const Scene& scene, const AppOptions& options,
-                                        const HandModel& hand_model) {
+                                        const HandModel& hand_model, const std::vector<DeformingSurface>& surfaces) {
   SceneDrawer d;
+  for (const DeformingSurface& s : surfaces) {
+    render::MeshData mesh;
+    mesh.name = s.name;
+    mesh.vertices.assign(s.vertex_count, render::Vertex{glm::vec3(0.0f), glm::vec3(0, 0, 1)});
+    mesh.indices = s.triangles;
+    auto id = renderer.upload_deforming(mesh);
+    if (!id) return id.error().with_context("deforming surface '" + s.name + "'");
+    d.surfaces_.push_back({*id, s.triangles, s.vertex_count, glm::vec4(s.rgba[0], s.rgba[1], s.rgba[2], s.rgba[3])});
+  }
   if (options.hand_look == HandLook::skinned) {
     Result<render::SkinnedMeshData> mesh =
         options.hand_gltf.empty()
@@ -111,6 +120,30 @@ void SceneDrawer::append_hand(render::DrawList& draws, const HandPose& pose, boo
     style.axes = false;
   }
   render::append_hand(draws, pose, unit_, style);
+}
+
+void SceneDrawer::append_surface(render::DrawList& draws, std::size_t i, const std::vector<Vec3>& p_world) const {
+  if (i >= surfaces_.size() || p_world.size() != surfaces_[i].vertex_count || p_world.empty()) return;
+  const Surface& s = surfaces_[i];
+  // Written straight into the draw list (which keeps its capacity), so a
+  // deforming surface allocates nothing per frame either.
+  const std::size_t first = draws.posed_vertices.size();
+  for (const Vec3& p : p_world) draws.posed_vertices.push_back({to_glm(p), glm::vec3(0.0f)});
+  render::Vertex* v = draws.posed_vertices.data() + first;
+  for (std::size_t t = 0; t + 2 < s.triangles.size(); t += 3) {
+    const auto a = s.triangles[t], b = s.triangles[t + 1], c = s.triangles[t + 2];
+    const glm::vec3 n = glm::cross(v[b].position - v[a].position, v[c].position - v[a].position);  // |n| = 2 area
+    v[a].normal += n;
+    v[b].normal += n;
+    v[c].normal += n;
+  }
+  for (std::size_t k = 0; k < s.vertex_count; ++k) {
+    const float len = glm::length(v[k].normal);
+    v[k].normal = len > 0.0f ? v[k].normal / len : glm::vec3(0, 0, 1);
+  }
+  render::SkinnedDrawItem item{s.mesh, 0, s.color};
+  item.first_posed_vertex = static_cast<std::uint32_t>(first);
+  draws.skinned.push_back(item);
 }
 
 }  // namespace proprio::engine

@@ -138,7 +138,7 @@ Result<AppReport> App::Impl::run_xr() {
     if (!r) return r.error();
     renderer = std::move(*r);
   }
-  auto drawer = SceneDrawer::create(*renderer, scene, options, *hand_model);
+  auto drawer = SceneDrawer::create(*renderer, scene, options, *hand_model, inputs.surfaces);
   if (!drawer) return drawer.error();
 
   XrGraphicsBindingVulkan2KHR binding{XR_TYPE_GRAPHICS_BINDING_VULKAN2_KHR};

@@ -74,6 +74,16 @@ struct AppOptions {
   Status validate() const;
 };
 
+// A surface whose vertices the app moves every frame (a stretch array's
+// reconstructed sheet): its triangles and vertex count are fixed up front,
+// FrameContext::surfaces gives the positions.
+struct DeformingSurface {
+  std::string name;
+  std::vector<std::uint32_t> triangles;  // counter-clockwise seen from the outside
+  std::size_t vertex_count = 0;
+  std::array<float, 4> rgba{0.85f, 0.55f, 0.3f, 1.0f};
+};
+
 // Per-frame app logic (a study's protocol) sees the frame's state and decides
 // what is shown. The outputs persist from frame to frame unless noted.
 struct FrameContext {
@@ -104,6 +114,9 @@ struct FrameContext {
     std::array<float, 4> rgba{1, 1, 1, 1};
   };
   std::vector<Marker> markers;         // cleared before every call
+  // One per AppInputs::surfaces entry: its vertices in the world frame
+  // (vertex_count of them, or none to hide it). Persist across frames.
+  std::vector<std::vector<Vec3>> surfaces;
   std::string prompt;                  // large centred text for the participant (cleared before every call)
   bool stop = false;                   // end the run after this frame
 };
@@ -127,6 +140,8 @@ struct AppInputs {
   // Called each frame after the hands and the servo snapshot are read and
   // before drawing.
   std::function<void(FrameContext&)> on_frame;
+  // Surfaces the frame hook deforms (FrameContext::surfaces).
+  std::vector<DeformingSurface> surfaces;
 };
 
 struct AppReport {

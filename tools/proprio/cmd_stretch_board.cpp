@@ -9,6 +9,10 @@
 //            read by the same host code as a real board; reports what the host
 //            decoded and checks it against what the board measured. With
 //            --out, writes the board's reports to a capture file instead.
+//            With --layout, the board serves a stretch sensor array's plan
+//            (pairs and single strips, protocol 1.1) over known, slowly
+//            varying cells, and the self-test also solves them back
+//            (StretchArrayReader).
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
@@ -20,8 +24,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <memory>
+#include <optional>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -32,6 +39,8 @@
 #include "proprio/core/log.hpp"
 #include "proprio/hid/capture_file.hpp"
 #include "proprio/hid/hid_transport.hpp"
+#include "proprio/stretch_array/array_layout.hpp"
+#include "proprio/stretch_board/stretch_array_reader.hpp"
 #include "proprio/stretch_board/stretch_device.hpp"
 #include "proprio/stretch_board/stretch_emulator.hpp"
 #include "proprio/stretch_board/stretch_protocol.hpp"
@@ -92,6 +101,29 @@ void print_grid(const LatestValues& latest, int top, int bottom) {
     }
     std::printf("\n");
   }
+  // Protocol 1.1's single-strip rows follow the pairs: top strips, then bottom strips.
+  const std::size_t pairs = static_cast<std::size_t>(top * bottom);
+  const std::size_t rows = stretch_row_count(static_cast<std::size_t>(top), static_cast<std::size_t>(bottom), true);
+  if (rows > kStretchMaxCombinations ||
+      std::none_of(latest.seen.begin() + static_cast<std::ptrdiff_t>(pairs),
+                   latest.seen.begin() + static_cast<std::ptrdiff_t>(rows), [](bool b) { return b; })) {
+    return;
+  }
+  for (const bool top_layer : {true, false}) {
+    std::printf("%s strips alone, pF:", top_layer ? "top   " : "bottom");
+    const std::size_t first = top_layer ? pairs : pairs + static_cast<std::size_t>(top);
+    const std::size_t n = static_cast<std::size_t>(top_layer ? top : bottom);
+    for (std::size_t c = first; c < first + n; ++c) {
+      if (!latest.seen[c]) {
+        std::printf(" %6s", "-");
+      } else if (latest.status[c] == StretchMeasurementStatus::ok) {
+        std::printf(" %6.1f", latest.pf[c]);
+      } else {
+        std::printf(" %6s", to_string(latest.status[c]));
+      }
+    }
+    std::printf("\n");
+  }
 }
 
 // The totals every mode ends with. span_s: the device time the measurements
@@ -111,9 +143,10 @@ void print_summary(const StretchStreamStats& s, double span_s) {
               ull(s.measurements), span_s > 0 ? static_cast<double>(s.measurements) / span_s : 0.0, ull(s.lost),
               percent(s.lost, expected), ull(s.gaps), ull(s.by_status[1]), ull(s.by_status[2]),
               ull(s.by_status[3]));
-  std::printf("board: %u x %u strips (%u combinations), measurement period %.2f us (%.1f/s), %llu restart(s), "
+  std::printf("board: %u x %u strips%s (%zu combinations), measurement period %.2f us (%.1f/s), %llu restart(s), "
               "%llu overrun report(s), %llu sequence wrap(s), %llu timestamp wrap(s)\n",
-              s.top_strips, s.bottom_strips, s.top_strips * s.bottom_strips, s.measurement_period_us,
+              s.top_strips, s.bottom_strips, s.single_strips ? " and single strips" : "",
+              stretch_row_count(s.top_strips, s.bottom_strips, s.single_strips), s.measurement_period_us,
               1e6 / s.measurement_period_us, ull(s.device_resets), ull(s.device_overruns), ull(s.sequence_wraps),
               ull(s.timestamp_wraps));
   if (s.decode_errors) {
@@ -247,10 +280,10 @@ void print_device_totals(const StretchDeviceStats& st, double elapsed) {
                                       : 0.0,
               static_cast<double>(st.excess_latency_max_ns) * 1e-6);
   if (st.have_info) {
-    std::printf("\nfirmware %u.%u.%u, %u x %u strips at %u measurements/s, full scale %.3f pF, parasitic %.3f pF "
+    std::printf("\nfirmware %u.%u.%u, %u x %u strips%s at %u measurements/s, full scale %.3f pF, parasitic %.3f pF "
                 "subtracted",
                 st.info.firmware[0], st.info.firmware[1], st.info.firmware[2], st.info.top_strips,
-                st.info.bottom_strips, st.info.rate_hz, stretch_count_to_pf(st.info.full_scale_ff),
+                st.info.bottom_strips, st.info.single_strips ? " and single strips" : "", st.info.rate_hz, stretch_count_to_pf(st.info.full_scale_ff),
                 stretch_count_to_pf(st.info.parasitic_ff));
   }
 }
@@ -332,6 +365,8 @@ struct EmulateArgs {
   int top_strips = 13;
   int bottom_strips = 14;
   int rate_hz = kStretchDefaultRateHz;
+  bool single_strips = false;
+  std::string layout;  // a stretch array's layout file: serve its plan over known cells
   BoardEmulatorFaultArgs link;
   double saturate = 0.0, overrun = 0.0;
 };
@@ -352,10 +387,58 @@ struct SyntheticProvider {
   static constexpr double max_slope_pf_per_s = 5.0 * 2.0 * M_PI * 0.4;
 };
 
+// What the emulated board measures: a provider, how fast its values can
+// change (for the value-at-time check), and with --layout the array and its
+// true cells (for the solve check).
+struct EmulatedSignal {
+  StretchCapacitanceProvider provider;
+  double max_slope_pf_per_s = 0.0;
+  std::shared_ptr<stretch_array::StripArrayLayout> layout;
+  std::function<void(TimeNs, std::span<double>)> cells;
+  std::vector<double> rest_pf;
+};
+
+// An array's cells: each at its rest capacitance times 1.1-1.5, breathing by
+// +-2 % at 0.05-0.2 Hz with its own phase (a sleeve on a slowly moving arm).
+constexpr double kCellDepth = 0.02;
+constexpr double kCellMaxHz = 0.2;
+Result<EmulatedSignal> signal_for(const EmulateArgs& a) {
+  EmulatedSignal sig;
+  if (a.layout.empty()) {
+    const SyntheticProvider p{static_cast<std::size_t>(a.bottom_strips)};
+    sig.provider = p;
+    sig.max_slope_pf_per_s = SyntheticProvider::max_slope_pf_per_s;
+    return sig;
+  }
+  auto layout = stretch_array::StripArrayLayout::load(a.layout);
+  if (!layout) return layout.error();
+  if (auto plan = stretch_array_plan(*layout); !plan) return plan.error();
+  sig.layout = std::make_shared<stretch_array::StripArrayLayout>(std::move(*layout));
+  sig.rest_pf = array_rest_capacitances_pf(*sig.layout);
+  const std::vector<double> rest = sig.rest_pf;
+  sig.cells = [rest](TimeNs t_ns, std::span<double> out) {
+    const double t = ns_to_seconds(t_ns);
+    for (std::size_t c = 0; c < rest.size(); ++c) {
+      const double k = static_cast<double>(c);
+      const double hz = 0.05 + 0.05 * std::fmod(k, 4.0);
+      out[c] = rest[c] * (1.3 + 0.2 * std::sin(1.7 * k) + kCellDepth * std::sin(2.0 * M_PI * hz * t + 0.37 * k));
+    }
+  };
+  // A row sums its cells: its slope is at most the sum of theirs.
+  const Eigen::MatrixXd M = sig.layout->measurement_matrix(true);
+  Eigen::VectorXd slope(static_cast<Eigen::Index>(rest.size()));
+  for (std::size_t c = 0; c < rest.size(); ++c)
+    slope(static_cast<Eigen::Index>(c)) = rest[c] * kCellDepth * 2.0 * M_PI * kCellMaxHz;
+  sig.max_slope_pf_per_s = (M * slope).maxCoeff();
+  sig.provider = stretch_array_provider(*sig.layout, sig.cells);
+  return sig;
+}
+
 StretchEmulatorOptions emulator_options(const EmulateArgs& a) {
   StretchEmulatorOptions eo;
   eo.top_strips = static_cast<std::uint8_t>(a.top_strips);
   eo.bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
+  eo.single_strips = a.single_strips;
   eo.rate_hz = static_cast<std::uint16_t>(a.rate_hz);
   eo.seed = a.seed;
   apply_board_emulator_faults(a.link, eo);
@@ -373,9 +456,9 @@ void print_board_faults(const StretchEmulatorStats& st) {
 }
 
 // Offline: the board's reports for --seconds, back to back, for 'monitor --from-file'.
-int emulate_to_file(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
+int emulate_to_file(const EmulateArgs& a, const StretchEmulatorOptions& eo, const EmulatedSignal& sig) {
   if (!a.force && std::filesystem::exists(a.out)) return logger().error("{} exists; pass --force to overwrite it", a.out), 1;
-  auto emulator = StretchEmulator::create(eo, SyntheticProvider{static_cast<std::size_t>(a.bottom_strips)});
+  auto emulator = StretchEmulator::create(eo, sig.provider);
   if (!emulator) return logger().error("{}", emulator.error().message), 1;
   if (auto s = check_output_path(a.out, "capture file"); !s) return report_error(s.error());
   std::ofstream file(a.out, std::ios::binary | std::ios::trunc);
@@ -393,37 +476,53 @@ int emulate_to_file(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   }
   file.close();
   if (!file) return logger().error("writing {} failed", a.out), 1;
-  std::printf("wrote %s: %llu bytes, %.1f s of a %d x %d strip board at %d measurements/s, seed %llu\n", a.out.c_str(),
-              ull(bytes), a.seconds, a.top_strips, a.bottom_strips, a.rate_hz, ull(a.seed));
+  std::printf("wrote %s: %llu bytes, %.1f s of a %d x %d strip board%s at %d measurements/s, seed %llu\n", a.out.c_str(),
+              ull(bytes), a.seconds, eo.top_strips, eo.bottom_strips, eo.single_strips ? " with single strips" : "",
+              a.rate_hz, ull(a.seed));
   print_board_faults(emulator->stats());
   return 0;
 }
 
 // Live: the board served over the in-memory HID link, the host reading it as a real one.
-int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
-  const SyntheticProvider provider{static_cast<std::size_t>(a.bottom_strips)};
+int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo, const EmulatedSignal& sig) {
+  const StretchCapacitanceProvider& provider = sig.provider;
   auto emulator = StretchEmulator::create(eo, provider);
   if (!emulator) return logger().error("{}", emulator.error().message), 1;
   auto link = std::make_shared<hid::FakeHidLink>();
   StretchEmulatorServer server(std::move(*emulator), link);
   StretchDeviceOptions o;
   o.stream.nominal_rate_hz = a.rate_hz;
-  o.stream.expected_top_strips = static_cast<std::uint8_t>(a.top_strips);
-  o.stream.expected_bottom_strips = static_cast<std::uint8_t>(a.bottom_strips);
+  o.stream.expected_top_strips = eo.top_strips;
+  o.stream.expected_bottom_strips = eo.bottom_strips;
+  o.stream.require_single_strips = eo.single_strips;
+  // With --layout the host solves the array as it arrives, on the consumer side.
+  std::optional<StretchArrayReader> reader;
+  if (sig.layout) {
+    auto r = StretchArrayReader::create(*sig.layout);
+    if (!r) return logger().error("{}", r.error().message), 1;
+    reader.emplace(std::move(*r));
+  }
+  stretch_array::CellFrame frame, last_frame;
+  if (reader) frame = reader->make_frame();
+  std::uint64_t frames = 0;
+  double worst_cell_error = 0.0;  // relative to the cell's rest capacitance, over the last second's frames
+  std::vector<double> truth(sig.rest_pf.size());
   o.reconnect_backoff_max_ns = 200 * kNsPerMillisecond;
   o.deliver_flagged = true;  // the self-test checks that flagged readings are the injected ones
   StretchDevice device(std::make_unique<hid::FakeHidTransport>(link), o);
   device.set_state_callback(print_link_state);
-  std::printf("emulating a %d x %d strip board (%d combinations) at %d measurements/s for %g s over the in-memory HID "
-              "link, seed %llu\n",
-              a.top_strips, a.bottom_strips, a.top_strips * a.bottom_strips, a.rate_hz, a.seconds, ull(a.seed));
+  std::printf("emulating a %d x %d strip board%s (%zu combinations)%s at %d measurements/s for %g s over the in-memory "
+              "HID link, seed %llu\n",
+              eo.top_strips, eo.bottom_strips, eo.single_strips ? " with single strips" : "", eo.combination_count(),
+              sig.layout ? (" serving layout '" + sig.layout->name + "'").c_str() : "", a.rate_hz, a.seconds,
+              ull(a.seed));
   if (auto s = device.start(); !s) return logger().error("{}", s.error().message), 1;
   server.start();
   // The unplugs cut the cable too: the host sees the board vanish and come back.
   for (const StretchOutage& u : eo.faults.unplugs) link->schedule_unplug(server.time_zero_ns() + u.at_ns, u.duration_ns);
 
   const TimeNs t0 = server.time_zero_ns();
-  const double tolerance_pf = SyntheticProvider::max_slope_pf_per_s * 0.010 + 0.5 * kStretchPfPerCount;
+  const double tolerance_pf = sig.max_slope_pf_per_s * 0.010 + 0.5 * kStretchPfPerCount;
   std::uint64_t checked = 0, wrong_values = 0, flagged_seen = 0, out_of_order = 0;
   double worst_error_pf = 0.0;
   TimeNs previous_time = 0;
@@ -431,6 +530,17 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   const double elapsed = watch(device, a.seconds, a.interval_s, latest, [&](const StretchSample& s) {
     if (s.time_ns <= previous_time) ++out_of_order;
     previous_time = s.time_ns;
+    if (reader && reader->add(std::span<const StretchSample>(&s, 1), frame)) {
+      ++frames;
+      last_frame = frame;
+      // After the first two seconds (cycles and the filter filled), against the cells at the frame's time.
+      if (frame.all_valid() && frame.time_ns - t0 > 2 * kNsPerSecond) {
+        sig.cells(frame.time_ns - t0, truth);
+        for (std::size_t c = 0; c < truth.size(); ++c) {
+          worst_cell_error = std::max(worst_cell_error, std::fabs(frame.cells_pf[c] - truth[c]) / sig.rest_pf[c]);
+        }
+      }
+    }
     if (s.status != StretchMeasurementStatus::ok) {
       ++flagged_seen;
       return;
@@ -448,7 +558,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   const hid::FakeHidLinkStats cable = link->stats();
   print_device_totals(st, elapsed);
   print_summary(st.stream, elapsed);
-  print_grid(latest, a.top_strips, a.bottom_strips);
+  print_grid(latest, eo.top_strips, eo.bottom_strips);
   std::printf("\n");
   print_board_faults(board);
 
@@ -467,7 +577,7 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
                 worst_error_pf, tolerance_pf, ull(wrong_values));
   check(wrong_values == 0, line);
   check(out_of_order == 0, "measurement times strictly increase (" + std::to_string(out_of_order) + " did not)");
-  const std::size_t combinations = static_cast<std::size_t>(a.top_strips * a.bottom_strips);
+  const std::size_t combinations = eo.combination_count();
   if (st.stream.measurements >= 2 * combinations) {
     check(latest.count() == combinations,
           "every combination was measured (" + std::to_string(latest.count()) + " of " + std::to_string(combinations) + ")");
@@ -486,14 +596,41 @@ int emulate_live(const EmulateArgs& a, const StretchEmulatorOptions& eo) {
   const std::uint64_t restarts = board.boots - 1;
   check(s.device_resets == restarts, "board restarts recognised (" + std::to_string(s.device_resets) + " of " +
                                          std::to_string(restarts) + ")");
+  if (reader && a.seconds > 3.0) {
+    // A frame mixes measurements up to a cycle plus the filter window old
+    // (Sec. 4.3.2), so it lags the moving cells: 2 % of C0 is several times
+    // what that lag costs here, and far below what a wrong row would.
+    std::snprintf(line, sizeof line,
+                  "the array reader solved %llu frames; the last has %zu of %zu cells valid; worst cell error after "
+                  "2 s %.3f %% of its rest capacitance (limit 2 %% without faults)",
+                  ull(frames), last_frame.cells_pf.empty() ? std::size_t{0} : static_cast<std::size_t>(std::count(
+                      last_frame.status.begin(), last_frame.status.end(), stretch_array::CellStatus::valid)),
+                  sig.rest_pf.size(), worst_cell_error * 100.0);
+    // With faults, lost and flagged rows leave older values and worse-conditioned
+    // row sets in the solve: the error is reported, and only the frames are checked.
+    if (eo.faults.any()) {
+      std::printf("  [info] %s\n", line);
+      check(frames > 0 && last_frame.all_valid(), "the array reader solved frames through the faults");
+    } else {
+      check(frames > 0 && last_frame.all_valid() && worst_cell_error < 0.02, line);
+    }
+  }
   std::printf("self-test %s\n", pass ? "PASSED" : "FAILED");
   return pass ? 0 : 1;
 }
 
 int run_emulate(const EmulateArgs& a) {
-  const StretchEmulatorOptions eo = emulator_options(a);
+  auto sig = signal_for(a);
+  if (!sig) return logger().error("{}", sig.error().message), 1;
+  StretchEmulatorOptions eo = emulator_options(a);
+  if (sig->layout) {
+    // The layout decides the strips, and its plan has single strips.
+    auto o = stretch_array_emulator_options(*sig->layout, eo);
+    if (!o) return logger().error("{}", o.error().message), 1;
+    eo = *o;
+  }
   if (auto s = eo.validate(); !s) return logger().error("{}", s.error().message), 1;
-  return a.out.empty() ? emulate_live(a, eo) : emulate_to_file(a, eo);
+  return a.out.empty() ? emulate_live(a, eo, *sig) : emulate_to_file(a, eo, *sig);
 }
 
 }  // namespace
@@ -551,6 +688,15 @@ void add_stretch_board_command(CLI::App& app, int& exit_code) {
   emu_cmd->add_option("--rate", emu->rate_hz, "Measurements per second")
       ->check(CLI::Range(1, static_cast<int>(kStretchMaxRateHz)))
       ->capture_default_str();
+  emu_cmd->add_flag("--single-strips", emu->single_strips,
+                    "Also measure every strip alone after the pairs (protocol 1.1; a sensor array's M^II rows)");
+  emu_cmd
+      ->add_option("--layout", emu->layout,
+                   "Serve this stretch sensor array layout (TOML, docs/stretch-arrays.md; 'proprio array layout' "
+                   "writes one): its strips and single "
+                   "strips over known, slowly varying cells; the self-test also solves the cells back. Overrides "
+                   "--top-strips, --bottom-strips and --single-strips")
+      ->check(CLI::ExistingFile);
   add_board_emulator_fault_options(*emu_cmd, emu->link, "the board");
   emu_cmd->add_option("--saturate", emu->saturate, "Probability, per measurement, of a saturated reading")
       ->check(CLI::Range(0.0, 1.0));

@@ -51,15 +51,17 @@ Result<std::string> StretchDevice::on_open(hid::HidTransport& transport) {
   std::string detail = transport.describe();
   if (options_.query_info) {
     const auto info = hid::query_info_report<kStretchInfoReportSize>(
-        transport, static_cast<std::uint8_t>(StretchReportId::device_info), decode_stretch_info_report, "stretch board");
+        transport, static_cast<std::uint8_t>(StretchReportId::device_info), decode_stretch_info_report,
+        "stretch board");
     if (info) {
       stats_.have_info = true;
       stats_.info = *info;
       char text[200];
-      std::snprintf(text, sizeof text, ": firmware %u.%u.%u, %u x %u strips (%zu combinations) at %u/s, full scale %.1f pF%s",
+      std::snprintf(text, sizeof text,
+                    ": firmware %u.%u.%u, %u x %u strips%s (%zu combinations) at %u/s, full scale %.1f pF%s",
                     info->firmware[0], info->firmware[1], info->firmware[2], info->top_strips, info->bottom_strips,
-                    info->combination_count(), info->rate_hz, stretch_count_to_pf(info->full_scale_ff),
-                    info->streaming ? "" : ", not streaming");
+                    info->single_strips ? " and single strips" : "", info->combination_count(), info->rate_hz,
+                    stretch_count_to_pf(info->full_scale_ff), info->streaming ? "" : ", not streaming");
       detail += text;
       const StretchStreamOptions& so = options_.stream;
       if ((so.expected_top_strips && info->top_strips != so.expected_top_strips) ||
@@ -67,6 +69,10 @@ Result<std::string> StretchDevice::on_open(hid::HidTransport& transport) {
         std::snprintf(text, sizeof text, "; WRONG LAYOUT: the layout expects %u x %u strips, so its "
                       "measurements will be refused", so.expected_top_strips, so.expected_bottom_strips);
         detail += text;
+      }
+      if (so.require_single_strips && !info->single_strips) {
+        detail += "; WRONG PLAN: the layout needs single-strip rows (protocol 1.1) and this board does not measure "
+                  "them, so its measurements will be refused";
       }
     }
   }
@@ -94,10 +100,12 @@ void StretchDevice::on_report(std::span<const std::uint8_t> report, TimeNs recei
   if (r.verdict == StretchReportVerdict::wrong_layout && !layout_warned_) {
     layout_warned_ = true;
     const StretchStreamStats& s = stream_.stats();
-    logger().error("stretch board: the board measures {} x {} strips but the layout expects {} x {}: a different "
-                   "glove is plugged in, or the layout file is not this glove's; its measurements are refused",
-                   s.top_strips, s.bottom_strips, options_.stream.expected_top_strips,
-                   options_.stream.expected_bottom_strips);
+    logger().error("stretch board: the board measures {} x {} strips{} but the layout expects {} x {}{}: a "
+                   "different glove or array is plugged in, the layout file is not this one's, or the firmware does "
+                   "not measure single strips; its measurements are refused",
+                   s.top_strips, s.bottom_strips, s.single_strips ? " with single strips" : " (pairs only)",
+                   options_.stream.expected_top_strips, options_.stream.expected_bottom_strips,
+                   options_.stream.require_single_strips ? " with single strips" : "");
   }
   if (data) {
     restart_.saw_data(receive_ns);

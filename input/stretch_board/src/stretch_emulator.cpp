@@ -73,6 +73,12 @@ Status StretchEmulatorOptions::validate() const {
                         std::to_string(kStretchMaxStrips) + " strips per layer");
     }
   }
+  if (combination_count() > kStretchMaxCombinations) {
+    return bad_option(std::to_string(top_strips) + " x " + std::to_string(bottom_strips) +
+                      " strips with single strips make " + std::to_string(combination_count()) +
+                      " rows, but the 10-bit combination field holds " + std::to_string(kStretchMaxCombinations) +
+                      "; use fewer strips or single_strips = false");
+  }
   if (rate_hz == 0 || rate_hz > kStretchMaxRateHz) {
     return bad_option("rate_hz = " + std::to_string(rate_hz) + "; the protocol allows 1 to " +
                       std::to_string(kStretchMaxRateHz) + " measurements per second");
@@ -227,7 +233,7 @@ void StretchEmulator::measure(TimeNs t_ns, std::vector<StretchEmulatedReport>& o
 void StretchEmulator::emit(TimeNs send_ns, std::vector<StretchEmulatedReport>& out) {
   StretchDataReport r = batch_;
   r.version = kStretchProtocolVersion;
-  r.flags = pending_flags_;
+  r.flags = static_cast<std::uint8_t>(pending_flags_ | (options_.single_strips ? stretch_flags::single_strips : 0));
   batch_.count = 0;
   batch_.measurements = {};
   if (overrun_rng_.uniform01() < options_.faults.device_overrun_probability) {
@@ -287,6 +293,7 @@ std::array<std::uint8_t, kStretchInfoReportSize> StretchEmulator::info_report(Ti
   info.firmware = options_.firmware;
   info.top_strips = options_.top_strips;
   info.bottom_strips = options_.bottom_strips;
+  info.single_strips = options_.single_strips;
   info.streaming = streaming_ && powered_at(t_ns);
   info.rate_hz = rate_hz_;
   info.full_scale_ff = full_scale_ff_;

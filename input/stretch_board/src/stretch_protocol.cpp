@@ -15,7 +15,7 @@ constexpr std::size_t version = 1;
 constexpr std::size_t firmware = 2;  // 3 bytes
 constexpr std::size_t top_strips = 5;
 constexpr std::size_t bottom_strips = 6;
-constexpr std::size_t state = 7;
+constexpr std::size_t state = 7;  // bit 0 streaming, bit 1 single strips (1.1)
 constexpr std::size_t rate_hz = 8;        // u16
 constexpr std::size_t full_scale_ff = 10;  // u32
 constexpr std::size_t parasitic_ff = 14;   // u32
@@ -24,6 +24,8 @@ constexpr std::size_t last_result = 19;
 constexpr std::size_t timestamp_us = 20;  // u32
 constexpr std::size_t crc = 30;
 }  // namespace info_layout
+constexpr std::uint8_t kStateStreaming = 0x01;
+constexpr std::uint8_t kStateSingleStrips = 0x02;
 namespace command_layout {
 constexpr std::size_t version = 1;
 constexpr std::size_t opcode = 2;
@@ -38,6 +40,17 @@ using hid::put_u16;
 using hid::put_u32;
 
 bool strips_ok(std::uint8_t n) noexcept { return n >= 1 && n <= kStretchMaxStrips; }
+
+// Strip counts in range and, with single strips, every row addressable by the 10-bit field.
+StretchDecodeStatus check_plan(std::uint8_t top, std::uint8_t bottom, bool single_strips) noexcept {
+  if (!strips_ok(top) || !strips_ok(bottom)) return {StretchDecodeErrc::bad_strip_count, top, bottom};
+  const std::size_t rows = stretch_row_count(top, bottom, single_strips);
+  if (rows > kStretchMaxCombinations) {
+    return {StretchDecodeErrc::too_many_rows, static_cast<std::uint32_t>(top) << 8 | bottom,
+            static_cast<std::uint32_t>(rows)};
+  }
+  return {};
+}
 
 // Length, ID, version and CRC: the checks every report type shares.
 StretchDecodeStatus check_frame(std::span<const std::uint8_t> bytes, StretchReportId id, std::size_t size,
@@ -86,6 +99,21 @@ StretchMeasurementRaw unpack_measurement(std::uint32_t v) noexcept {
 
 }  // namespace
 
+StretchSources stretch_sources(std::size_t c, std::size_t top_strips, std::size_t bottom_strips) noexcept {
+  StretchSources s;
+  const std::size_t pairs = top_strips * bottom_strips;
+  if (bottom_strips == 0) return s;
+  if (c < pairs) {
+    s.top_strip = static_cast<std::uint8_t>(c / bottom_strips);
+    s.bottom_strip = static_cast<std::uint8_t>(c % bottom_strips);
+  } else if (c < pairs + top_strips) {
+    s.top_strip = static_cast<std::uint8_t>(c - pairs);
+  } else if (c < pairs + top_strips + bottom_strips) {
+    s.bottom_strip = static_cast<std::uint8_t>(c - pairs - top_strips);
+  }
+  return s;
+}
+
 const char* to_string(StretchMeasurementStatus status) noexcept {
   switch (status) {
     case StretchMeasurementStatus::ok: return "ok";
@@ -110,6 +138,7 @@ const char* to_string(StretchDecodeErrc code) noexcept {
     case StretchDecodeErrc::bad_rate: return "bad_rate";
     case StretchDecodeErrc::bad_full_scale: return "bad_full_scale";
     case StretchDecodeErrc::unknown_command: return "unknown_command";
+    case StretchDecodeErrc::too_many_rows: return "too_many_rows";
   }
   return "unknown";
 }
@@ -137,10 +166,20 @@ std::string describe(const StretchDecodeStatus& s) {
       break;
     case StretchDecodeErrc::bad_combination:
       std::snprintf(buf, sizeof buf,
-                    "bad combination %u: the board reports %u combinations (top x bottom strips), so indices run "
-                    "from 0 to %u",
+                    "bad combination %u: the report says the board measures %u combinations (top x bottom strip "
+                    "pairs, plus top + bottom single strips when it flags single_strips), so indices run from 0 to "
+                    "%u; a board that measures single strips must say so with protocol 1.1's single_strips flag",
                     s.actual, s.expected, s.expected == 0 ? 0u : s.expected - 1);
       break;
+    case StretchDecodeErrc::too_many_rows: {
+      const unsigned top = s.expected >> 8 & 0xFF, bottom = s.expected & 0xFF;
+      std::snprintf(buf, sizeof buf,
+                    "too many rows: %u x %u strips with single strips make %u x %u + %u + %u = %u combinations, but "
+                    "the 10-bit combination field holds %zu; such a board cannot report single strips (use fewer "
+                    "strips, or pairs only)",
+                    top, bottom, top, bottom, top, bottom, s.actual, kStretchMaxCombinations);
+      break;
+    }
     case StretchDecodeErrc::bad_rate:
       std::snprintf(buf, sizeof buf, "bad rate %u measurements/s: a board measures at 1 to %u per second", s.actual,
                     kStretchMaxRateHz);
@@ -201,8 +240,9 @@ StretchDecodeStatus decode_stretch_data_report(std::span<const std::uint8_t> b, 
   if (count == 0 || count > kStretchMeasurementsPerReport) return {StretchDecodeErrc::bad_count, 0, count};
   const std::uint8_t top = b[L::top_strips];
   const std::uint8_t bottom = b[L::bottom_strips];
-  if (!strips_ok(top) || !strips_ok(bottom)) return {StretchDecodeErrc::bad_strip_count, top, bottom};
-  const std::uint32_t combinations = static_cast<std::uint32_t>(top) * bottom;
+  const bool single_strips = stretch_single_strips(b[L::version], b[L::flags]);
+  if (auto s = check_plan(top, bottom, single_strips); !s) return s;
+  const auto combinations = static_cast<std::uint32_t>(stretch_row_count(top, bottom, single_strips));
   // Check every measurement before writing any, so a rejected report leaves out untouched.
   for (std::size_t i = 0; i < count; ++i) {
     const std::uint32_t c = get_u32(b, L::measurements + i * L::measurement_size) & stretch_measurement_bits::combination_mask;
@@ -231,7 +271,8 @@ std::array<std::uint8_t, kStretchInfoReportSize> encode_stretch_info_report(cons
   for (std::size_t i = 0; i < 3; ++i) b[L::firmware + i] = info.firmware[i];
   b[L::top_strips] = info.top_strips;
   b[L::bottom_strips] = info.bottom_strips;
-  b[L::state] = info.streaming ? 1 : 0;
+  b[L::state] = static_cast<std::uint8_t>((info.streaming ? kStateStreaming : 0) |
+                                          (info.single_strips ? kStateSingleStrips : 0));
   put_u16(&b[L::rate_hz], info.rate_hz);
   put_u32(&b[L::full_scale_ff], info.full_scale_ff);
   put_u32(&b[L::parasitic_ff], info.parasitic_ff);
@@ -247,7 +288,9 @@ StretchDecodeStatus decode_stretch_info_report(std::span<const std::uint8_t> b, 
   if (auto s = check_frame(b, StretchReportId::device_info, kStretchInfoReportSize, L::version, L::crc); !s) return s;
   const std::uint8_t top = b[L::top_strips];
   const std::uint8_t bottom = b[L::bottom_strips];
-  if (!strips_ok(top) || !strips_ok(bottom)) return {StretchDecodeErrc::bad_strip_count, top, bottom};
+  // Bit 1 of the state byte was reserved in 1.0: a 1.0 board's never counts.
+  const bool single_strips = (b[L::version] & 0x0F) >= 1 && (b[L::state] & kStateSingleStrips) != 0;
+  if (auto s = check_plan(top, bottom, single_strips); !s) return s;
   const std::uint16_t rate = get_u16(b, L::rate_hz);
   if (rate == 0 || rate > kStretchMaxRateHz) return {StretchDecodeErrc::bad_rate, kStretchMaxRateHz, rate};
   const std::uint32_t full_scale = get_u32(b, L::full_scale_ff);
@@ -258,7 +301,8 @@ StretchDecodeStatus decode_stretch_info_report(std::span<const std::uint8_t> b, 
   for (std::size_t i = 0; i < 3; ++i) out.firmware[i] = b[L::firmware + i];
   out.top_strips = top;
   out.bottom_strips = bottom;
-  out.streaming = (b[L::state] & 1) != 0;
+  out.streaming = (b[L::state] & kStateStreaming) != 0;
+  out.single_strips = single_strips;
   out.rate_hz = rate;
   out.full_scale_ff = full_scale;
   out.parasitic_ff = get_u32(b, L::parasitic_ff);

@@ -84,8 +84,10 @@ void StretchStreamDecoder::begin_epoch(const StretchDataReport& r, bool is_reset
   any_accepted_ = false;
   top_strips_ = r.top_strips;
   bottom_strips_ = r.bottom_strips;
+  single_strips_ = r.single_strips();
   stats_.top_strips = r.top_strips;
   stats_.bottom_strips = r.bottom_strips;
+  stats_.single_strips = single_strips_;
   // The first lap of the unwrapped values equals the wire values, which keeps
   // them recognisable in logs and makes the unwrapped time equal the wire's modulo 2^32.
   newest_seq_ = r.sequence;
@@ -128,10 +130,12 @@ StretchPushResult StretchStreamDecoder::push(std::span<const std::uint8_t> repor
     return result;
   }
   if ((options_.expected_top_strips != 0 && r.top_strips != options_.expected_top_strips) ||
-      (options_.expected_bottom_strips != 0 && r.bottom_strips != options_.expected_bottom_strips)) {
+      (options_.expected_bottom_strips != 0 && r.bottom_strips != options_.expected_bottom_strips) ||
+      (options_.require_single_strips && !r.single_strips())) {
     ++stats_.wrong_layout;
     stats_.top_strips = r.top_strips;
     stats_.bottom_strips = r.bottom_strips;
+    stats_.single_strips = r.single_strips();
     result.verdict = StretchReportVerdict::wrong_layout;
     result.count = r.count;
     return result;
@@ -144,7 +148,8 @@ StretchPushResult StretchStreamDecoder::push(std::span<const std::uint8_t> repor
   // duplicate arrives within a few reports of the original (in host time, or
   // in sequence when there are no host times); anything later is a restart.
   bool repeats_epoch_start = locked_ && r.sequence == epoch_start_seq_ && r.timestamp_us == epoch_start_ts_ &&
-                             r.top_strips == top_strips_ && r.bottom_strips == bottom_strips_;
+                             r.top_strips == top_strips_ && r.bottom_strips == bottom_strips_ &&
+                             r.single_strips() == single_strips_;
   if (repeats_epoch_start) {
     repeats_epoch_start =
         (receive_ns != 0 && epoch_start_receive_ns_ != 0)
@@ -153,6 +158,7 @@ StretchPushResult StretchStreamDecoder::push(std::span<const std::uint8_t> repor
             : newest_end_ - static_cast<std::int64_t>(epoch_start_seq_) < kWindow;
   }
   bool new_epoch = !locked_ || r.top_strips != top_strips_ || r.bottom_strips != bottom_strips_ ||
+                   r.single_strips() != single_strips_ ||
                    (flagged_start && !repeats_epoch_start);
   std::int64_t seq = r.sequence;
   std::int64_t device_us = r.timestamp_us;
@@ -252,7 +258,6 @@ StretchPushResult StretchStreamDecoder::push(std::span<const std::uint8_t> repor
   any_accepted_ = true;
   if (r.flags & stretch_flags::overrun) ++stats_.device_overruns;
 
-  const std::uint8_t bottom = r.bottom_strips;
   for (std::size_t i = 0; i < r.count; ++i) {
     const StretchMeasurementRaw& m = r.measurements[i];
     const StretchMeasurementStatus st = host_status(m);
@@ -263,8 +268,9 @@ StretchPushResult StretchStreamDecoder::push(std::span<const std::uint8_t> repor
     StretchSample& o = out[i];
     o.capacitance_pf = stretch_count_to_pf(m.value);
     o.combination = m.combination;
-    o.top_strip = static_cast<std::uint8_t>(m.combination / bottom);
-    o.bottom_strip = static_cast<std::uint8_t>(m.combination % bottom);
+    const StretchSources sources = stretch_sources(m.combination, r.top_strips, r.bottom_strips);
+    o.top_strip = sources.top_strip;
+    o.bottom_strip = sources.bottom_strip;
     o.status = st;
     o.time_ns = 0;
     o.receive_ns = receive_ns;

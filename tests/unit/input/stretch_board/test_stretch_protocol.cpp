@@ -71,7 +71,7 @@ TEST(StretchProtocol, DataReportBytesFollowTheDocumentedLayout) {
   const Bytes b = bytes_of(a);
   ASSERT_EQ(b.size(), 64u);
   EXPECT_EQ(b[0], 0x21);
-  EXPECT_EQ(b[1], 0x10);  // version 1.0
+  EXPECT_EQ(b[1], 0x11);  // version 1.1
   EXPECT_EQ(le32(b, 2), 0x12345678u);
   EXPECT_EQ(b[2], 0x78);  // little-endian
   EXPECT_EQ(le32(b, 6), 0xDEADBEEFu);
@@ -105,7 +105,7 @@ TEST(StretchProtocol, InfoAndCommandBytesFollowTheDocumentedLayout) {
   info.timestamp_us = 0xFFFFFFF0u;
   const Bytes ib = bytes_of(encode_stretch_info_report(info));
   ASSERT_EQ(ib.size(), 32u);
-  const std::uint8_t head[10] = {0x22, 0x10, 2, 7, 13, 13, 14, 1, 0xC0, 0x03};
+  const std::uint8_t head[10] = {0x22, 0x11, 2, 7, 13, 13, 14, 1, 0xC0, 0x03};
   EXPECT_EQ(0, std::memcmp(ib.data(), head, 10));
   EXPECT_EQ(le32(ib, 10), 1000000u);
   EXPECT_EQ(le32(ib, 14), 15250u);
@@ -124,7 +124,7 @@ TEST(StretchProtocol, InfoAndCommandBytesFollowTheDocumentedLayout) {
   c.rate_hz = 0x0FA0;
   const Bytes cb = bytes_of(encode_stretch_command(c));
   ASSERT_EQ(cb.size(), 16u);
-  const std::uint8_t cmd[6] = {0x30, 0x10, 0x03, 77, 0xA0, 0x0F};
+  const std::uint8_t cmd[6] = {0x30, 0x11, 0x03, 77, 0xA0, 0x0F};
   EXPECT_EQ(0, std::memcmp(cb.data(), cmd, 6));
   for (std::size_t i = 6; i < 14; ++i) EXPECT_EQ(cb[i], 0) << i;
   for (auto op : {StretchCommandOp::start_streaming, StretchCommandOp::stop_streaming, StretchCommandOp::set_rate}) {
@@ -342,6 +342,202 @@ TEST(StretchProtocolErrors, EveryCodeHasANameAndAMessage) {
   for (std::size_t i = 0; i < kStretchMeasurementStatusCount; ++i) {
     EXPECT_STRNE(to_string(static_cast<StretchMeasurementStatus>(i)), "unknown");
   }
+}
+
+// ---------------------------------------------------------------------------
+// Protocol 1.1: single-strip rows
+
+StretchDataReport single_strip_report(std::uint8_t top, std::uint8_t bottom) {
+  StretchDataReport r;
+  r.top_strips = top;
+  r.bottom_strips = bottom;
+  r.flags = stretch_flags::single_strips;
+  r.count = 12;
+  const std::size_t rows = stretch_row_count(top, bottom, true);
+  // The last 12 rows: the tail of the pairs (when there are few singles) and every single strip it reaches.
+  for (std::size_t i = 0; i < 12; ++i) {
+    const std::size_t c = rows >= 12 ? rows - 12 + i : i % rows;
+    r.measurements[i] = {static_cast<std::uint16_t>(c), StretchMeasurementStatus::ok,
+                         static_cast<std::uint32_t>(1000 + i)};
+  }
+  return r;
+}
+
+TEST(StretchProtocol11, CombinationsBeyondThePairsAreSingleStripsTopFirst) {
+  // 3 x 2: pairs 0-5 as (c / 2, c % 2), then T0 T1 T2 B0 B1 as 6-10.
+  const std::vector<StretchSources> expected = {{0, 0}, {0, 1}, {1, 0}, {1, 1}, {2, 0}, {2, 1},
+                                                {0, kStretchNoStrip}, {1, kStretchNoStrip}, {2, kStretchNoStrip},
+                                                {kStretchNoStrip, 0}, {kStretchNoStrip, 1}};
+  ASSERT_EQ(stretch_row_count(3, 2, true), expected.size());
+  EXPECT_EQ(stretch_row_count(3, 2, false), 6u);
+  for (std::size_t c = 0; c < expected.size(); ++c) {
+    EXPECT_EQ(stretch_sources(c, 3, 2), expected[c]) << c;
+    EXPECT_EQ(stretch_sources(c, 3, 2).single(), c >= 6) << c;
+  }
+  EXPECT_EQ(stretch_sources(11, 3, 2), StretchSources{});  // beyond the plan: no strips
+  EXPECT_EQ(stretch_sources(0, 3, 0), StretchSources{});
+}
+
+TEST(StretchProtocol11, DataReportWithSingleStripsRoundTripsAndSaysSo) {
+  Rng rng(11);
+  for (int n = 0; n < 2000; ++n) {
+    StretchDataReport r = random_report(rng);
+    // Strip counts whose rows fit the 10-bit field: n k + n + k <= 1024 holds up to 31 x 31.
+    r.top_strips = static_cast<std::uint8_t>(1 + rng.below(31));
+    r.bottom_strips = static_cast<std::uint8_t>(1 + rng.below(31));
+    r.flags = static_cast<std::uint8_t>(rng.below(4) | stretch_flags::single_strips);
+    ASSERT_TRUE(r.single_strips());
+    const std::size_t pairs = static_cast<std::size_t>(r.top_strips) * r.bottom_strips;
+    ASSERT_EQ(r.combination_count(), pairs + r.top_strips + r.bottom_strips);
+    for (std::size_t i = 0; i < r.count; ++i) {
+      // Half of them single strips.
+      r.measurements[i].combination = static_cast<std::uint16_t>(
+          i % 2 ? pairs + rng.below(r.top_strips + r.bottom_strips) : rng.below(pairs));
+    }
+    const auto bytes = encode_stretch_data_report(r);
+    EXPECT_EQ(bytes[10] & 0x04, 0x04);
+    StretchDataReport back;
+    const auto s = decode_stretch_data_report(bytes, back);
+    ASSERT_TRUE(s.ok()) << describe(s);
+    ASSERT_EQ(back, r);
+    ASSERT_TRUE(back.single_strips());
+    ASSERT_EQ(encode_stretch_data_report(back), bytes);
+  }
+  // The very last row of a 12 x 12 array: bottom strip 11 alone, combination 167.
+  StretchDataReport r = single_strip_report(12, 12);
+  ASSERT_EQ(r.measurements[11].combination, 167u);
+  const auto back = decode_stretch_data_report(encode_stretch_data_report(r));
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->measurements[11].combination, 167u);
+  EXPECT_EQ(stretch_sources(167, 12, 12), (StretchSources{kStretchNoStrip, 11}));
+}
+
+TEST(StretchProtocol11, InfoReportCarriesTheSingleStripFlag) {
+  StretchDeviceInfo info;
+  info.top_strips = 12;
+  info.bottom_strips = 12;
+  info.rate_hz = 960;
+  info.streaming = true;
+  info.single_strips = true;
+  const Bytes b = bytes_of(encode_stretch_info_report(info));
+  EXPECT_EQ(b[1], 0x11);
+  EXPECT_EQ(b[7], 0x03);  // bit 0 streaming, bit 1 single strips
+  auto back = decode_stretch_info_report(b);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(*back, info);
+  EXPECT_EQ(back->combination_count(), 168u);
+  info.single_strips = false;
+  EXPECT_EQ(decode_stretch_info_report(encode_stretch_info_report(info))->combination_count(), 144u);
+}
+
+TEST(StretchProtocol11, AVersion10BoardHasNoSingleStripRowsWhateverItsReservedBitsSay) {
+  // A 1.0 board: the bit 1.1 calls single_strips was reserved, so it means nothing,
+  // and a combination past the pairs is refused with a message that says what is missing.
+  StretchDataReport r = single_strip_report(12, 12);
+  r.version = 0x10;
+  EXPECT_FALSE(r.single_strips());
+  EXPECT_EQ(r.combination_count(), 144u);
+  StretchDataReport out;
+  const auto s = decode_stretch_data_report(encode_stretch_data_report(r), out);
+  EXPECT_EQ(s.code, StretchDecodeErrc::bad_combination);
+  EXPECT_EQ(s.expected, 144u);
+  EXPECT_EQ(s.actual, 156u);  // the first single strip in the report: 168 - 12
+  const std::string m = describe(s);
+  EXPECT_NE(m.find("bad combination 156"), std::string::npos) << m;
+  EXPECT_NE(m.find("0 to 143"), std::string::npos) << m;
+  EXPECT_NE(m.find("single_strips flag"), std::string::npos) << m;
+  // A 1.1 report without the flag is refused the same way.
+  r.version = kStretchProtocolVersion;
+  r.flags = 0;
+  EXPECT_EQ(decode_stretch_data_report(encode_stretch_data_report(r), out).code, StretchDecodeErrc::bad_combination);
+  // The pairs of a 1.0 board decode as they always did.
+  r = valid_report();
+  r.version = 0x10;
+  r.flags = stretch_flags::single_strips;
+  ASSERT_TRUE(decode_stretch_data_report(encode_stretch_data_report(r), out).ok());
+  EXPECT_FALSE(out.single_strips());
+  // A 1.0 info report with bit 1 of its state byte set: no single strips.
+  StretchDeviceInfo info;
+  info.version = 0x10;
+  info.top_strips = 12;
+  info.bottom_strips = 12;
+  info.rate_hz = 960;
+  info.single_strips = true;  // encoded as bit 1 ...
+  const Bytes ib = bytes_of(encode_stretch_info_report(info));
+  EXPECT_EQ(ib[7] & 0x02, 0x02);
+  auto back = decode_stretch_info_report(ib);  // ... which 1.0 reserved
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_FALSE(back->single_strips);
+  EXPECT_EQ(back->combination_count(), 144u);
+}
+
+TEST(StretchProtocol11, PlansWhoseRowsOverflowTheCombinationFieldAreRefused) {
+  // 31 x 31 + 62 = 1023 rows fit; 32 x 31 + 63 = 1055 do not; 32 x 32 pairs alone (1024) still do.
+  StretchDataReport r = single_strip_report(31, 31);
+  StretchDataReport out;
+  ASSERT_TRUE(decode_stretch_data_report(encode_stretch_data_report(r), out).ok());
+  EXPECT_EQ(out.measurements[11].combination, 1022u);
+  r.top_strips = 32;
+  const auto s = decode_stretch_data_report(encode_stretch_data_report(r), out);
+  EXPECT_EQ(s.code, StretchDecodeErrc::too_many_rows);
+  EXPECT_EQ(s.actual, 1055u);
+  const std::string m = describe(s);
+  EXPECT_NE(m.find("32 x 31 strips"), std::string::npos) << m;
+  EXPECT_NE(m.find("1055"), std::string::npos) << m;
+  EXPECT_NE(m.find("1024"), std::string::npos) << m;
+  r.flags = 0;
+  r.bottom_strips = 32;
+  for (auto& mm : r.measurements) mm.combination = 1023;
+  EXPECT_TRUE(decode_stretch_data_report(encode_stretch_data_report(r), out).ok());
+
+  StretchDeviceInfo info;
+  info.top_strips = 32;
+  info.bottom_strips = 32;
+  info.rate_hz = 960;
+  info.single_strips = true;
+  const auto ir = decode_stretch_info_report(encode_stretch_info_report(info));
+  ASSERT_FALSE(ir.ok());
+  EXPECT_NE(ir.error().message.find("too many rows"), std::string::npos) << ir.error().message;
+  EXPECT_NE(ir.error().message.find("device info report"), std::string::npos) << ir.error().message;
+}
+
+TEST(StretchStream, SingleStripSamplesNameTheirOneStripAndAPlanChangeIsARestart) {
+  StretchStreamDecoder d;
+  std::array<StretchSample, kStretchMeasurementsPerReport> out;
+  StretchDataReport r = single_strip_report(3, 2);  // 11 rows: 12 measurements wrap to row 0
+  r.flags |= stretch_flags::stream_start;
+  auto res = d.push(encode_stretch_data_report(r), out);
+  ASSERT_EQ(res.verdict, StretchReportVerdict::accepted);
+  ASSERT_EQ(res.sample_count, 12u);
+  EXPECT_TRUE(d.stats().single_strips);
+  for (std::size_t i = 0; i < 12; ++i) {
+    const StretchSources src = stretch_sources(out[i].combination, 3, 2);
+    EXPECT_EQ(out[i].top_strip, src.top_strip) << i;
+    EXPECT_EQ(out[i].bottom_strip, src.bottom_strip) << i;
+  }
+  EXPECT_EQ(out[6].top_strip, 0);
+  EXPECT_EQ(out[6].bottom_strip, kStretchNoStrip);
+  EXPECT_EQ(out[10].top_strip, kStretchNoStrip);
+  EXPECT_EQ(out[10].bottom_strip, 1);
+  // The next report without the flag (firmware reconfigured): a new epoch, not a continuation.
+  StretchDataReport pairs = valid_report();
+  pairs.top_strips = 3;
+  pairs.bottom_strips = 2;
+  pairs.sequence = 12;
+  pairs.timestamp_us = r.timestamp_us + 12'500;
+  for (std::size_t i = 0; i < 12; ++i) pairs.measurements[i].combination = static_cast<std::uint16_t>(i % 6);
+  res = d.push(encode_stretch_data_report(pairs), out);
+  EXPECT_EQ(res.verdict, StretchReportVerdict::accepted);
+  EXPECT_TRUE(res.device_reset);
+  EXPECT_FALSE(d.stats().single_strips);
+
+  // A decoder that needs single strips refuses the pairs-only board's reports.
+  StretchStreamOptions o;
+  o.require_single_strips = true;
+  StretchStreamDecoder strict(o);
+  EXPECT_EQ(strict.push(encode_stretch_data_report(pairs), out).verdict, StretchReportVerdict::wrong_layout);
+  EXPECT_EQ(strict.push(encode_stretch_data_report(r), out).verdict, StretchReportVerdict::accepted);
+  EXPECT_EQ(strict.stats().wrong_layout, 1u);
 }
 
 // ---------------------------------------------------------------------------

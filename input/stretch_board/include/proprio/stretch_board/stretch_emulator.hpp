@@ -38,8 +38,9 @@
 
 namespace proprio::devices {
 
-// Capacitance in pF that combination (t * bottom_strips + b) reads when
-// measured at t_ns (the emulator's time base). May return anything: negative
+// Capacitance in pF that combination c reads when measured at t_ns (the
+// emulator's time base): c = t * bottom_strips + b for a pair, n k + s for
+// single strip s with single_strips on (stretch_sources()). May return anything: negative
 // values read below zero, non-finite ones no signal, large ones saturate.
 using StretchCapacitanceProvider = std::function<double(std::size_t combination, TimeNs t_ns)>;
 
@@ -71,6 +72,10 @@ struct StretchEmulatorFaults {
 struct StretchEmulatorOptions {
   std::uint8_t top_strips = 13;  // the thesis glove: 13 + 14 leads, 182 combinations
   std::uint8_t bottom_strips = 14;
+  // Protocol 1.1: measure the n + k single strips too, after the n k pairs
+  // (an array's M^II rows; StretchArrayPlan makes options for a layout).
+  // n k + n + k must fit the 10-bit combination field.
+  bool single_strips = false;
   std::uint16_t rate_hz = kStretchDefaultRateHz;  // measurements per second
   // The board's full scale (reported in the info report; readings at or above
   // it saturate) and the parasitic capacitance it measures and subtracts (only
@@ -94,9 +99,8 @@ struct StretchEmulatorOptions {
   std::uint64_t seed = 1;
   StretchEmulatorFaults faults;
 
-  std::size_t combination_count() const noexcept {
-    return static_cast<std::size_t>(top_strips) * static_cast<std::size_t>(bottom_strips);
-  }
+  // Rows measured in turn: the pairs, then the single strips if on.
+  std::size_t combination_count() const noexcept { return stretch_row_count(top_strips, bottom_strips, single_strips); }
   Status validate() const;
 };
 

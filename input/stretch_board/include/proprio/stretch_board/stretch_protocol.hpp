@@ -1,15 +1,22 @@
 #pragma once
-// The stretch glove read-out board's USB HID wire protocol, version 1.0: byte
+// The stretch read-out board's USB HID wire protocol, version 1.1: byte
 // layouts, units and pure encode/decode functions. The specification, with the
 // reasons behind each choice and a firmware sketch, is
 // docs/stretch-glove-hid-protocol.md; the constants and layouts here must
 // match it byte for byte.
 //
-// The board time-multiplexes the glove's electrode strips (Glauser 2019,
-// Sec. 4.3.2 and 5.2.1): each measurement drives one top strip t and one
-// bottom strip b as the source electrode, grounds all others and reports one
-// capacitance for combination t * bottom_strips + b (the row of
-// StretchGloveLayout::measurement_matrix()). Three numbered HID reports, all
+// The board time-multiplexes the electrode strips of a glove or a sensor
+// array (Glauser 2019, Sec. 4.3.2 and 5.2.1): each measurement connects a set
+// of strips as the source electrode, grounds all others and reports one
+// capacitance, tagged with its "combination" (its row of the measurement matrix):
+//   c < n k:        top strip c / k and bottom strip c % k together (M^I; the
+//                   rows of StretchGloveLayout::measurement_matrix() and of
+//                   StripArrayLayout::measurement_plan()'s first n k rows);
+//   n k <= c < n k + n + k (1.1, boards that say single_strips): one strip
+//                   alone, s = c - n k, the n top strips first, then the k
+//                   bottom ones (M^II: StripArrayLayout::measurement_plan(true)'s
+//                   remaining rows, in the same order).
+// n = top strips, k = bottom strips. Three numbered HID reports, all
 // little-endian, each ending in the CRC-16 of glove_protocol.hpp:
 //   0x21 measurements (input,   64 bytes): up to 12 consecutive measurements
 //   0x22 device info  (feature, 32 bytes): firmware, strips, full scale, rate
@@ -47,9 +54,11 @@ inline constexpr std::uint16_t kStretchHidUsage = 0x02;
 
 // Version byte: major in the high nibble, minor in the low, with the IMU
 // glove's rules (any minor of a known major decodes; reserved bits and bytes
-// are zero when sent and ignored when received).
+// are zero when sent and ignored when received). 1.1 added the single-strip
+// rows (stretch_flags::single_strips, StretchDeviceInfo::single_strips): bits
+// that 1.0 reserved, so a report stamped 1.0 never has them, whatever its bits say.
 inline constexpr std::uint8_t kStretchProtocolMajor = 1;
-inline constexpr std::uint8_t kStretchProtocolMinor = 0;
+inline constexpr std::uint8_t kStretchProtocolMinor = 1;
 inline constexpr std::uint8_t kStretchProtocolVersion =
     static_cast<std::uint8_t>(kStretchProtocolMajor << 4 | kStretchProtocolMinor);
 
@@ -63,10 +72,30 @@ inline constexpr std::size_t kStretchDataReportSize = 64;  // one full-speed int
 inline constexpr std::size_t kStretchInfoReportSize = 32;
 inline constexpr std::size_t kStretchCommandReportSize = 16;
 inline constexpr std::size_t kStretchMeasurementsPerReport = 12;  // 14-byte header + 12 x 4 + CRC = 64
-// Strips per layer: 1-32, so that a combination fits the 10 bits the wire
-// gives it (32 x 32 = 1024; the thesis glove has 13 x 14 = 182).
+// Strips per layer: 1-32, so that a pair combination fits the 10 bits the
+// wire gives it (32 x 32 = 1024; the thesis glove has 13 x 14 = 182).
+// kStretchMaxCombinations is what the 10-bit field holds: a board measuring
+// single strips too needs n k + n + k <= 1024 (up to 31 x 31, or 12 x 12 =
+// 168 rows for the thesis's arrays); more is refused (too_many_rows).
 inline constexpr std::size_t kStretchMaxStrips = 32;
 inline constexpr std::size_t kStretchMaxCombinations = kStretchMaxStrips * kStretchMaxStrips;
+// Rows a board of n x k strips reports: the pairs, plus the single strips when it measures them.
+inline constexpr std::size_t stretch_row_count(std::size_t top_strips, std::size_t bottom_strips,
+                                               bool single_strips) noexcept {
+  return top_strips * bottom_strips + (single_strips ? top_strips + bottom_strips : 0);
+}
+// Which strips a combination connects as the source. A strip index of
+// kStretchNoStrip means that layer has none (a single-strip row).
+inline constexpr std::uint8_t kStretchNoStrip = 0xFF;
+struct StretchSources {
+  std::uint8_t top_strip = kStretchNoStrip;
+  std::uint8_t bottom_strip = kStretchNoStrip;
+  bool single() const noexcept { return top_strip == kStretchNoStrip || bottom_strip == kStretchNoStrip; }
+  bool operator==(const StretchSources&) const = default;
+};
+// Combination c of an n x k board (c < stretch_row_count(n, k, true); beyond,
+// both strips are kStretchNoStrip). k = 0 gives no strips.
+StretchSources stretch_sources(std::size_t combination, std::size_t top_strips, std::size_t bottom_strips) noexcept;
 // Measurements per second the board may be set to. 1000 reports/s of 12 would
 // carry 12000; the charge-time circuit needs a few oscillator periods plus
 // switch settling per measurement, which a 4 kHz slot leaves room for.
@@ -131,11 +160,21 @@ inline constexpr std::uint8_t stream_start = 0x01;
 // queue was full because the host was not reading, or a measurement overran
 // its slot). They still used up sequence numbers, so the host sees the gap.
 inline constexpr std::uint8_t overrun = 0x02;
+// 1.1: the board measures the n + k single strips too, so combinations run
+// to n k + n + k - 1. In every report, so that each decodes alone (a capture,
+// a host that attached mid-stream); the info report says the same (byte 7, bit 1).
+inline constexpr std::uint8_t single_strips = 0x04;
 }  // namespace stretch_flags
+
+// Whether a report stamped `version` with these flags carries single-strip
+// rows: the flag, from protocol 1.1 on (1.0 reserved the bit).
+inline constexpr bool stretch_single_strips(std::uint8_t version, std::uint8_t flags) noexcept {
+  return (version & 0x0F) >= 1 && (flags & stretch_flags::single_strips) != 0;
+}
 
 // One measurement as on the wire.
 struct StretchMeasurementRaw {
-  std::uint16_t combination = 0;  // t * bottom_strips + b
+  std::uint16_t combination = 0;  // t * bottom_strips + b, or n k + single strip (stretch_sources())
   StretchMeasurementStatus status = StretchMeasurementStatus::ok;
   std::uint32_t value = 0;  // fF, 0 to kStretchMaxCapacitanceCount
   bool operator==(const StretchMeasurementRaw&) const = default;
@@ -158,8 +197,10 @@ struct StretchDataReport {
   std::uint8_t bottom_strips = 0;
   std::array<StretchMeasurementRaw, kStretchMeasurementsPerReport> measurements{};  // count of them meaningful
 
+  bool single_strips() const noexcept { return stretch_single_strips(version, flags); }
+  // Combinations this report may carry: the rows of the board's plan.
   std::size_t combination_count() const noexcept {
-    return static_cast<std::size_t>(top_strips) * static_cast<std::size_t>(bottom_strips);
+    return stretch_row_count(top_strips, bottom_strips, single_strips());
   }
   bool operator==(const StretchDataReport&) const = default;
 };
@@ -192,6 +233,9 @@ struct StretchDeviceInfo {
   std::uint8_t top_strips = 0;
   std::uint8_t bottom_strips = 0;
   bool streaming = false;
+  // 1.1: the board also measures the n + k single strips (byte 7, bit 1;
+  // always false in a report stamped 1.0).
+  bool single_strips = false;
   std::uint16_t rate_hz = 0;  // measurements per second
   // The largest capacitance the board can report, fF (at most
   // kStretchMaxCapacitanceCount); readings at or above it come flagged saturated.
@@ -203,9 +247,8 @@ struct StretchDeviceInfo {
   StretchCommandResult last_command_result = StretchCommandResult::none;
   std::uint32_t timestamp_us = 0;  // device clock when the report was made
 
-  std::size_t combination_count() const noexcept {
-    return static_cast<std::size_t>(top_strips) * static_cast<std::size_t>(bottom_strips);
-  }
+  // The rows of the board's plan: pairs, and single strips when it measures them.
+  std::size_t combination_count() const noexcept { return stretch_row_count(top_strips, bottom_strips, single_strips); }
   bool operator==(const StretchDeviceInfo&) const = default;
 };
 
@@ -220,12 +263,17 @@ enum class StretchDecodeErrc : std::uint8_t {
   crc_mismatch,         // expected = CRC in the report, actual = CRC of its bytes
   bad_count,            // measurement count 0 or above 12; actual = count
   bad_strip_count,      // a layer with 0 or more than 32 strips; expected = top, actual = bottom
-  bad_combination,      // a combination beyond top x bottom; expected = top x bottom, actual = combination
+  // a combination beyond the board's rows; expected = rows (top x bottom, + top + bottom
+  // with single strips), actual = combination
+  bad_combination,
   bad_rate,             // info report rate 0 or above kStretchMaxRateHz; actual = rate
   bad_full_scale,       // info report full scale 0 or beyond 20 bits; actual = full scale, fF
   unknown_command,      // actual = opcode
+  // 1.1: single strips on, but n k + n + k rows do not fit the 10-bit
+  // combination field; expected = top * 256 + bottom, actual = rows
+  too_many_rows,
 };
-inline constexpr std::size_t kStretchDecodeErrcCount = 12;
+inline constexpr std::size_t kStretchDecodeErrcCount = 13;
 const char* to_string(StretchDecodeErrc code) noexcept;
 
 using StretchDecodeStatus = hid::DecodeStatus<StretchDecodeErrc>;

@@ -16,7 +16,7 @@
 // power-up, START or SET_RATE (stretch_flags::stream_start), but that report
 // can be the one lost, so a sequence that disagrees with the timestamp (by
 // more than 4 measurements plus 0.1 % of the distance) also starts a new epoch,
-// as does a change of strip counts.
+// as does a change of strip counts or of the plan (single strips on or off).
 //
 // Not thread-safe; one owner (the reader thread) pushes. No allocation.
 #include <array>
@@ -31,7 +31,10 @@ namespace proprio::devices {
 // One capacitance measurement as the host delivers it.
 struct StretchSample {
   double capacitance_pf = 0.0;    // after the board subtracted its parasitic capacitance
-  std::uint16_t combination = 0;  // top_strip * bottom_strips + bottom_strip: the row of the measurement matrix
+  // The row of the measurement matrix: top_strip * bottom_strips + bottom_strip
+  // for a pair, n k + strip for a single strip (protocol 1.1; stretch_sources()).
+  std::uint16_t combination = 0;
+  // The source strips; kStretchNoStrip for the layer a single-strip row leaves out.
   std::uint8_t top_strip = 0;
   std::uint8_t bottom_strip = 0;
   // The board's status, or saturated for a value at the wire's rail; anything
@@ -58,6 +61,9 @@ struct StretchStreamOptions {
   // are refused (wrong glove, or wrong layout file), not decoded into wrong cells.
   std::uint8_t expected_top_strips = 0;
   std::uint8_t expected_bottom_strips = 0;
+  // Refuse (wrong_layout) reports of a board that does not measure single
+  // strips: a layout that needs M^II rows cannot be solved without them.
+  bool require_single_strips = false;
 };
 
 enum class StretchReportVerdict : std::uint8_t {
@@ -67,7 +73,7 @@ enum class StretchReportVerdict : std::uint8_t {
                  // takes its measurements off the loss count
   decode_error,  // not a valid report: dropped, counted by reason
   other_report,  // a valid report of another type (device info): no measurements
-  wrong_layout,  // valid, but the board's strip counts are not the expected ones: dropped
+  wrong_layout,  // valid, but the board's strip counts (or plan) are not the expected ones: dropped
 };
 inline constexpr std::size_t kStretchReportVerdictCount = 6;
 const char* to_string(StretchReportVerdict verdict) noexcept;
@@ -112,6 +118,7 @@ struct StretchStreamStats {
   std::uint64_t timestamp_wraps = 0;
   std::uint8_t top_strips = 0;  // as the board last said
   std::uint8_t bottom_strips = 0;
+  bool single_strips = false;
   double measurement_period_us = 0.0;  // measured in device µs (nominal until measured)
   StretchDecodeStatus last_decode_error;
   // Flagged measurements per combination, to find a broken lead or a shorted cell.
@@ -150,6 +157,7 @@ class StretchStreamDecoder {
   bool any_accepted_ = false;  // in this epoch
   std::uint32_t epoch_ = 0;
   std::uint8_t top_strips_ = 0, bottom_strips_ = 0;
+  bool single_strips_ = false;
   std::int64_t newest_seq_ = 0;        // unwrapped measurement 0 of the newest accepted report
   std::int64_t newest_device_us_ = 0;  // unwrapped timestamp of that report
   std::int64_t newest_end_ = 0;        // one past its last measurement

@@ -37,6 +37,12 @@ void add_haptics_device_commands(CLI::App& haptics, int& exit_code);
 void add_layer_commands(CLI::App& app, int& exit_code);
 // `array layout|check`: stretch sensor array layouts (proprio::stretch_array).
 void add_array_commands(CLI::App& app, int& exit_code);
+// `sim-array`, `bench array` and `train array`: the stretch arrays' datasets,
+// benchmark and regressor training (proprio::stretch_array_eval).
+void add_stretch_array_commands(CLI::App& app, int& exit_code);
+void add_train_array_command(CLI::App& app, int& exit_code);
+// `record array`: a stretch array's session from its read-out board (proprio-devices).
+void add_record_array_command(CLI::App& app, int& exit_code);
 // `psychometric fit`, `stats ...` and `study ...` (proprio::study).
 void add_study_commands(CLI::App& app, int& exit_code);
 // `run SCENE`: the engine (proprio::engine).

@@ -86,7 +86,21 @@ constexpr CommandInfo kCommands[] = {
      "prints the layer config lines to paste.",
      Family::engine, false},
 #endif
-    {"record", "Record training data", Family::trackers, true},
+    {"record", "Record sessions and training data", Family::split, true},
+    {"record glove",
+     "Record a stretch-glove training session: the read-out board's frames (USB HID) paired with a ground-truth\n"
+     "hand recorded at the same time (a .prec from a hand tracker, CLOCK_MONOTONIC timestamps), written as a\n"
+     "dataset for tools/stretch_glove (train.py, finetune.py). The first --exploration-seconds are the session's\n"
+     "min-max calibration phase.",
+     Family::trackers, false},
+    {"record array",
+     "Record a stretch sensor array (docs/stretch-arrays.md) from its read-out board (USB HID, protocol 1.1 with\n"
+     "single strips) or, with --emulate, the board emulator: the first --rest-seconds calibrate the rows'\n"
+     "parasitics and each cell's C0 with the sleeve at rest, then the raw row measurements and the solved cells\n"
+     "(F, with C0 in the stream's meta) go to a session recording (.prec) until --seconds or Ctrl-C.\n"
+     "Exit status 1 when the board does not match the layout, sends nothing, or is unplugged for longer than\n"
+     "--disconnect-timeout (the recording then keeps what came before).",
+     Family::devices, false},
     {"glove",
      "The USB HID IMU glove (7 IMUs at 100 Hz; protocol in docs/glove-hid-protocol.md): list devices, monitor a "
      "glove or a capture file, or emulate one.",
@@ -100,6 +114,21 @@ constexpr CommandInfo kCommands[] = {
      "Simulate stretch-glove sessions and write a training dataset (cells.npy, angles.npy, session.npy, "
      "subject.npy, phase.npy, calib_min.npy, calib_max.npy, meta.json).\n"
      "Each session is a new donning: an exploration phase for the min-max calibration, then free motion.",
+     Family::trackers, false},
+    {"sim-array",
+     "Simulate stretch-array sessions (a sleeve on a balloon, biceps, elbow, wrist or forearm) and write a dataset:\n"
+     "the elastic sheet on the moving body, the read-out board with the effects the model ignores, the markers\n"
+     "through a simulated optical system and the semi-automatic labelling. docs/stretch-arrays.md.",
+     Family::trackers, false},
+    {"bench array",
+     "The stretch array's accuracy on simulated data: a 15 x 50 mm cell on a linear stage (eq. 4.2) and a\n"
+     "string-pulled sheet read through the whole read-out (eq. 4.8). Simulated accuracy is not real-world accuracy.",
+     Family::trackers, false},
+    {"train", "Train regressors on recorded or simulated data", Family::trackers, true},
+    {"train array",
+     "Train the stretch array's regressors (the thesis's DNN, linear regression, an RBF kernel model) on a dataset\n"
+     "(PyTorch, tools/stretch_array/train.py) into OUT/<kind>/model.onnx, which the live pipeline runs through\n"
+     "OpenCV DNN.",
      Family::trackers, false},
     {"stretch-board",
      "The stretch glove's USB HID read-out board (13 x 14 strips, 960 measurements/s; protocol in "

@@ -25,6 +25,8 @@ void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_cod
   add_calibrate_command(app, exit_code);
   add_stretch_glove_commands(app, exit_code);
   add_sim_glove_command(app, exit_code);
+  add_stretch_array_commands(app, exit_code);
+  add_train_array_command(app, exit_code);
   add_ftm_commands(app, exit_code);
   add_calibrate_ftm_command(app, exit_code);
 #endif
@@ -32,6 +34,7 @@ void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_cod
   add_glove_command(app, exit_code);
   add_stretch_board_command(app, exit_code);
   add_ftm_board_command(app, exit_code);
+  add_record_array_command(app, exit_code);
 #endif
 #ifdef PROPRIO_CLI_FAMILY_HAPTICS
   add_haptics_commands(app, exit_code);

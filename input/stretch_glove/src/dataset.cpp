@@ -45,12 +45,7 @@ std::string json_number(double v) {
   return buf;
 }
 
-Error io_error(const std::filesystem::path& path, const std::string& what) {
-  return make_error(Errc::io_error, "dataset file '" + path.string() + "': " + what);
-}
-
 }  // namespace
-
 
 // --- dataset -----------------------------------------------------------------------------
 

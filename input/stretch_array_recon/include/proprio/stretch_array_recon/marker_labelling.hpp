@@ -39,21 +39,14 @@
 #include <Eigen/Geometry>
 
 #include "proprio/core/result.hpp"
+#include "proprio/stretch_array/mocap_frame.hpp"
 #include "proprio/stretch_array_recon/arap.hpp"
 #include "proprio/stretch_array_recon/recon_mesh.hpp"
 
 namespace proprio::stretch_array_recon {
 
-// What the motion capture gives (the mocap simulator produces these; the
-// lead will move them to a shared header).
-struct MocapObservation {
-  std::uint32_t label;
-  Eigen::Vector3d position_m;
-};
-struct MocapFrame {
-  double t_s;
-  std::vector<MocapObservation> observations;
-};
+using stretch_array::MocapFrame;
+using stretch_array::MocapObservation;
 
 // A manual match in the first frame: `label` is marker `marker` (an index
 // into the marker vertex list, not a mesh vertex).

@@ -70,8 +70,9 @@ Result<ReconMesh> build_recon_mesh(const stretch_array::StripArrayLayout& layout
 // Marker vertices: cell centroids chosen on a regular grid over the sheet
 // with spacing at most max_spacing_m, the cell centroid nearest each grid
 // node, no cell twice; nodes over bare sheet get none. The thesis put 21
-// markers on its 92-cell sensor, at most 5 cm apart; 35 mm gives prototype_92
-// a 5 x 5 grid (33 mm) less its two bare corners: 21 markers.
+// markers on its 92-cell sensor, at most 5 cm apart; 35 mm gives
+// prototype_92 (a stand-in layout) 19, its banded cells leaving more of the
+// grid's corners bare.
 struct MarkerSelectionOptions {
   double max_spacing_m = 0.035;
   Status validate() const;

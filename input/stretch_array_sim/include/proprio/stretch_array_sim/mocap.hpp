@@ -31,17 +31,12 @@
 #include <Eigen/Core>
 
 #include "proprio/core/result.hpp"
+#include "proprio/stretch_array/mocap_frame.hpp"
 
 namespace proprio::stretch_array_sim {
 
-struct MocapObservation {
-  std::uint32_t label;
-  Eigen::Vector3d position_m;
-};
-struct MocapFrame {
-  double t_s;
-  std::vector<MocapObservation> observations;
-};
+using stretch_array::MocapFrame;
+using stretch_array::MocapObservation;
 
 // Probability that `marker` is visible in frame `frame` at `position_m`.
 using VisibilityHook = std::function<double(std::size_t marker, std::uint64_t frame, const Eigen::Vector3d& position_m)>;

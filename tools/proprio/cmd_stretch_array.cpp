@@ -1,7 +1,9 @@
 // proprio sim-array and bench array: the stretch sensor arrays' simulated
 // datasets and their benchmark (issue 30, docs/stretch-arrays.md). The
 // pipelines are stretch_array_eval's (sim_array.hpp, array_bench.hpp).
+#include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -94,6 +96,7 @@ int run_sim_array(SimArrayArgs a) {
 
 struct BenchArrayArgs {
   sae::BenchArrayOptions options;
+  sae::DatasetBenchOptions dataset;
   std::vector<std::string> cases = {"uniaxial", "string-pull"};
   std::vector<std::string> without;
   bool json = false;
@@ -114,6 +117,12 @@ int run_bench_array(BenchArrayArgs a) {
     auto r = sae::bench_string_pull(o);
     if (!r) return report_error(r.error().with_context("bench array string-pull"));
     report.string_pull = *r;
+  }
+  if (!a.dataset.dataset.empty() || !a.dataset.models.empty()) {
+    auto r = sae::bench_dataset(a.dataset, &report.speed);
+    if (!r) return report_error(r.error().with_context("bench array on " + a.dataset.dataset));
+    report.dataset = std::move(*r);
+    report.dataset_name = std::filesystem::path(a.dataset.dataset).filename().string();
   }
   std::printf("%s\n", a.json ? report.json().c_str() : report.describe().c_str());
   return 0;
@@ -176,6 +185,12 @@ void add_stretch_array_commands(CLI::App& app, int& exit_code) {
   bench->add_option("--without", bargs->without, "Board effects to switch off: " + CLI::detail::join(kBoardEffects))
       ->delimiter(',')
       ->check(CLI::IsMember(kBoardEffects));
+  bench->add_option("--dataset", bargs->dataset.dataset,
+                    "A sim-array dataset: its test sessions are reconstructed with --models (marker and dense vertex "
+                    "error, and the per-frame time)");
+  bench->add_option("--models", bargs->dataset.models, "train array's --out folder (dnn/, lr/, svm/) or an .onnx file");
+  bench->add_option("--layout", bargs->dataset.layout_file, "The dataset's layout, when it is not a shipped one")
+      ->check(CLI::ExistingFile);
   bench->add_flag("--json", bargs->json, "Print the results as JSON");
   bench->callback([bargs, &exit_code] { exit_code = run_bench_array(*bargs); });
 }

@@ -27,7 +27,7 @@ import torch  # noqa: E402
 import array_dataset as ads  # noqa: E402
 import regressors  # noqa: E402
 
-SIDECAR_FORMAT = "proprio-stretch-array-model"
+SIDECAR_FORMAT = "proprio-stretch-array-regressor"
 SIDECAR_VERSION = 1
 OPSET = 11
 onnx_info = ads.load_glove_module("onnx_info")

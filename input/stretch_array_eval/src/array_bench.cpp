@@ -1,6 +1,9 @@
 #include "proprio/stretch_array_eval/array_bench.hpp"
 
 #include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <random>
 #include <cmath>
 #include <numeric>
 
@@ -8,7 +11,10 @@
 #include <nlohmann/json.hpp>
 
 #include "proprio/elastic_sheet/flat_scenarios.hpp"
+#include "proprio/stretch_array_eval/array_dataset.hpp"
+#include "proprio/stretch_array_recon/array_reconstructor.hpp"
 #include "proprio/stretch_array/array_layout.hpp"
+#include "proprio/stretch_array/capacitance.hpp"
 #include "proprio/stretch_array/matrix_readout.hpp"
 #include "proprio/stretch_array/sheet_mesh.hpp"
 #include "proprio/stretch_array_sim/array_sheet.hpp"
@@ -251,6 +257,162 @@ Result<StringPullResult> bench_string_pull(const BenchArrayOptions& o) {
   return r;
 }
 
+Status DatasetBenchOptions::validate() const {
+  if (dataset.empty()) return make_error(Errc::invalid_argument, "no dataset (--dataset)");
+  if (models.empty()) return make_error(Errc::invalid_argument, "no models (--models: train array's --out, or an .onnx)");
+  return {};
+}
+
+namespace {
+
+Result<sa::StripArrayLayout> dataset_layout(const ArrayDataset& d, const std::string& layout_file) {
+  if (!layout_file.empty()) return sa::StripArrayLayout::load(layout_file);
+  if (d.shape.layout == "prototype_92") return sa::StripArrayLayout::prototype_92();
+  if (d.shape.layout == "biceps_144") return sa::StripArrayLayout::biceps_144();
+  return make_error(Errc::invalid_argument, "the dataset's layout '" + d.shape.layout +
+                                                "' is not a shipped one; pass the layout file (--layout)");
+}
+
+// (kind, model file) pairs: train array's OUT/<kind>/model.onnx, or one file.
+Result<std::vector<std::pair<std::string, std::filesystem::path>>> model_files(const std::string& where) {
+  std::vector<std::pair<std::string, std::filesystem::path>> out;
+  const std::filesystem::path p(where);
+  if (p.extension() == ".onnx") {
+    out.emplace_back(p.parent_path().filename().string(), p);
+    return out;
+  }
+  for (const char* kind : {"dnn", "svm", "lr"}) {
+    if (std::filesystem::is_regular_file(p / kind / "model.onnx")) out.emplace_back(kind, p / kind / "model.onnx");
+  }
+  if (out.empty()) {
+    return make_error(Errc::not_found, "no model in '" + where + "': expected <kind>/model.onnx (proprio train array "
+                                                                  "--out) or an .onnx file");
+  }
+  return out;
+}
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+Result<std::vector<ModelSessionResult>> bench_dataset(const DatasetBenchOptions& o, std::optional<SpeedResult>* speed) {
+  namespace sar = stretch_array_recon;
+  if (auto st = o.validate(); !st) return st.error();
+  auto d = load_array_dataset(o.dataset);
+  if (!d) return d.error();
+  auto layout = dataset_layout(*d, o.layout_file);
+  if (!layout) return layout.error();
+  const std::size_t C = d->shape.cell_names.size(), M = d->shape.marker_names.size(), V = d->shape.mesh_vertex_count;
+  if (layout->cell_count() != C) {
+    return make_error(Errc::invalid_argument, fmt::format("the layout has {} cells, the dataset {}", layout->cell_count(), C));
+  }
+  auto mesh = sar::build_recon_mesh(*layout);
+  if (!mesh) return mesh.error();
+  auto markers = sar::select_marker_vertices(*mesh);
+  if (!markers) return markers.error();
+  if (markers->size() != M || mesh->vertex_count() != V) {
+    return make_error(Errc::invalid_argument,
+                      fmt::format("the dataset has {} markers and {} mesh vertices, this build's reconstruction mesh {} "
+                                  "and {}: the dataset was made with other mesh options",
+                                  M, V, markers->size(), mesh->vertex_count()));
+  }
+  auto models = model_files(o.models);
+  if (!models) return models.error();
+
+  std::vector<ModelSessionResult> results;
+  std::vector<double> first_regressor_ms, first_arap_ms;
+  for (const auto& [kind, file] : *models) {
+    for (const auto& session : d->sessions) {
+      if (session.split != "test") continue;
+      auto regressor = sar::MarkerRegressor::load(file, C, M);
+      if (!regressor) return regressor.error();
+      auto recon = sar::ArrayReconstructor::create(*mesh, *markers, std::move(*regressor));
+      if (!recon) return recon.error();
+      ModelSessionResult r;
+      r.model_kind = kind;
+      r.session = session.name;
+      r.donning = session.donning;
+      r.frames = session.frames;
+      std::vector<double> marker_mm, labelled_mm, vertex_mm, regressor_ms, arap_ms;
+      Eigen::VectorXd cells(static_cast<Eigen::Index>(C));
+      sar::ReconstructedFrame frame;
+      for (std::size_t f = session.first_frame; f < session.first_frame + session.frames; ++f) {
+        for (std::size_t c = 0; c < C; ++c) cells[static_cast<Eigen::Index>(c)] = d->cells.values[f * C + c];
+        if (f == session.first_frame) {
+          if (auto st = recon->align_session_from_cells(cells); !st) return st.error();
+        }
+        if (auto st = recon->reconstruct(cells, frame); !st) return st.error().with_context(session.name);
+        for (std::size_t m = 0; m < M; ++m) {
+          const std::size_t at = (f * M + m) * 3;
+          const Eigen::Vector3d p = frame.markers_m.row(static_cast<Eigen::Index>(m)).transpose();
+          const Eigen::Vector3d truth(d->markers_truth.values[at], d->markers_truth.values[at + 1],
+                                      d->markers_truth.values[at + 2]);
+          const Eigen::Vector3d labelled(d->markers.values[at], d->markers.values[at + 1], d->markers.values[at + 2]);
+          marker_mm.push_back(1e3 * (p - truth).norm());
+          labelled_mm.push_back(1e3 * (p - labelled).norm());
+        }
+        for (std::size_t v = 0; v < V; ++v) {
+          const std::size_t at = (f * V + v) * 3;
+          const Eigen::Vector3d truth(d->vertices_truth.values[at], d->vertices_truth.values[at + 1],
+                                      d->vertices_truth.values[at + 2]);
+          vertex_mm.push_back(1e3 * (frame.vertices_m.row(static_cast<Eigen::Index>(v)).transpose() - truth).norm());
+        }
+        regressor_ms.push_back(1e3 * frame.regressor_s);
+        arap_ms.push_back(1e3 * frame.arap_s);
+      }
+      if (first_regressor_ms.empty()) first_regressor_ms = regressor_ms, first_arap_ms = arap_ms;
+      r.marker_error_mm = ErrorStats::of(std::move(marker_mm));
+      r.marker_error_labelled_mm = ErrorStats::of(std::move(labelled_mm));
+      r.vertex_error_mm = ErrorStats::of(std::move(vertex_mm));
+      r.regressor_ms = ErrorStats::of(std::move(regressor_ms));
+      r.arap_ms = ErrorStats::of(std::move(arap_ms));
+      results.push_back(std::move(r));
+    }
+  }
+  if (results.empty()) return make_error(Errc::invalid_argument, "the dataset has no test session (split = test)");
+
+  if (speed) {
+    // The read-out's solve of a whole plan, timed on rows of the rest sheet
+    // with a little noise, as many frames as the model was timed on.
+    auto readout = sa::make_array_readout(*layout);
+    if (!readout) return readout.error();
+    const Eigen::MatrixXd Mx = layout->measurement_matrix(true);
+    Eigen::VectorXd c0(static_cast<Eigen::Index>(C));
+    for (std::size_t c = 0; c < C; ++c) {
+      c0[static_cast<Eigen::Index>(c)] = sa::plate_capacitance_f(layout->sheet.relative_permittivity,
+                                                                  layout->rest_area_m2(c),
+                                                                  layout->sheet.dielectric_thickness_m) * 1e12;
+    }
+    const Eigen::VectorXd rows0 = Mx * c0;
+    std::mt19937_64 rng(1);
+    std::normal_distribution<double> noise(0.0, 0.002);
+    sa::CellFrame cell_frame = readout->make_frame();
+    std::vector<double> rows(static_cast<std::size_t>(rows0.size())), solve_ms, total_ms;
+    for (std::size_t f = 0; f < first_regressor_ms.size(); ++f) {
+      for (std::size_t r = 0; r < rows.size(); ++r) rows[r] = rows0[static_cast<Eigen::Index>(r)] + noise(rng);
+      const auto t0 = std::chrono::steady_clock::now();
+      if (auto st = readout->solve(rows, static_cast<TimeNs>(f), cell_frame); !st) return st.error();
+      solve_ms.push_back(ms_since(t0));
+      total_ms.push_back(solve_ms.back() + first_regressor_ms[f] + first_arap_ms[f]);
+    }
+    SpeedResult sp;
+    sp.layout = layout->name;
+    sp.cells = C;
+    sp.rows = rows.size();
+    sp.vertices = V;
+    sp.markers = M;
+    sp.model = (*models)[0].second.string();
+    sp.solve_ms = ErrorStats::of(solve_ms);
+    sp.regressor_ms = ErrorStats::of(first_regressor_ms);
+    sp.arap_ms = ErrorStats::of(first_arap_ms);
+    sp.total_ms = ErrorStats::of(total_ms);
+    *speed = sp;
+  }
+  return results;
+}
+
 std::string BenchArrayReport::json() const {
   nlohmann::ordered_json j;
   j["simulated"] = "simulated accuracy is not real-world accuracy";
@@ -280,6 +442,40 @@ std::string BenchArrayReport::json() const {
   } else {
     j["string_pull"] = {{"ran", false}};
   }
+  if (!dataset.empty()) {
+    auto& rows = j["dataset"] = nlohmann::ordered_json::array();
+    for (const auto& r : dataset) {
+      rows.push_back({{"ran", true},
+                      {"dataset", dataset_name},
+                      {"model", r.model_kind},
+                      {"session", r.session},
+                      {"donning", r.donning},
+                      {"frames", r.frames},
+                      {"marker_error_mm", stats_json(r.marker_error_mm)},
+                      {"marker_error_vs_labelled_mm", stats_json(r.marker_error_labelled_mm)},
+                      {"vertex_error_mm", stats_json(r.vertex_error_mm)},
+                      {"regressor_ms", stats_json(r.regressor_ms)},
+                      {"arap_ms", stats_json(r.arap_ms)}});
+    }
+  } else {
+    j["dataset"] = {{"ran", false}};
+  }
+  if (speed) {
+    j["speed"] = {{"ran", true},
+                  {"layout", speed->layout},
+                  {"cells", speed->cells},
+                  {"rows", speed->rows},
+                  {"vertices", speed->vertices},
+                  {"markers", speed->markers},
+                  {"model", speed->model},
+                  {"solve_ms", stats_json(speed->solve_ms)},
+                  {"regressor_ms", stats_json(speed->regressor_ms)},
+                  {"arap_ms", stats_json(speed->arap_ms)},
+                  {"total_ms", stats_json(speed->total_ms)},
+                  {"target_ms", 5.0}};
+  } else {
+    j["speed"] = {{"ran", false}};
+  }
   return j.dump(2);
 }
 
@@ -305,6 +501,29 @@ std::string BenchArrayReport::describe() const {
                      100 * p.relative_error_ideal.mean);
   } else {
     s += "  string-pull: not run\n";
+  }
+  if (!dataset.empty()) {
+    s += fmt::format("  {} test sessions: error in mm, mean / std / max (thesis Table 4.1 reports against its mocap)\n",
+                     dataset_name);
+    for (const auto& r : dataset) {
+      s += fmt::format("    {:4} {:24} {:5} frames  markers vs truth {:.2f} / {:.2f} / {:.2f}, vs labelled {:.2f}; "
+                       "dense vertices {:.2f} / {:.2f} / {:.2f}\n",
+                       r.model_kind, r.session, r.frames, r.marker_error_mm.mean, r.marker_error_mm.std,
+                       r.marker_error_mm.max, r.marker_error_labelled_mm.mean, r.vertex_error_mm.mean,
+                       r.vertex_error_mm.std, r.vertex_error_mm.max);
+    }
+  } else {
+    s += "  dataset: not run (--dataset and --models)\n";
+  }
+  if (speed) {
+    s += fmt::format("  speed, {} ({} cells, {} rows, {} vertices, {} markers), one core, per frame: solve {:.3f} ms, "
+                     "regressor {:.2f} ms, ARAP {:.2f} ms, total mean {:.2f} ms, p95 {:.2f}, max {:.2f} "
+                     "(target <= 5 ms); model {}\n",
+                     speed->layout, speed->cells, speed->rows, speed->vertices, speed->markers, speed->solve_ms.mean,
+                     speed->regressor_ms.mean, speed->arap_ms.mean, speed->total_ms.mean, speed->total_ms.p95,
+                     speed->total_ms.max, speed->model);
+  } else {
+    s += "  speed: not run (needs --dataset and --models)\n";
   }
   return s;
 }

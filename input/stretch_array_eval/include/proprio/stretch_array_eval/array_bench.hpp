@@ -52,6 +52,32 @@ struct StringPullResult {
   ErrorStats relative_error_stretched;  // only cells whose eq. 4.8 ratio is above 1.05
 };
 
+// One model on one test session of a dataset.
+struct ModelSessionResult {
+  std::string model_kind;  // dnn | lr | svm (from its sidecar), or the file name
+  std::string session;
+  int donning = 0;
+  std::size_t frames = 0;
+  ErrorStats marker_error_mm;          // the regressor's markers against the true ones
+  ErrorStats marker_error_labelled_mm; // against the labelled mocap (what the thesis could measure)
+  ErrorStats vertex_error_mm;          // the ARAP-deformed mesh against the true sheet, every vertex
+  ErrorStats regressor_ms, arap_ms;    // per frame, one core
+};
+
+struct DatasetBenchOptions {
+  std::string dataset;      // a sim-array dataset folder
+  std::string models;       // a folder with <kind>/model.onnx (train array --out), or one .onnx file
+  std::string layout_file;  // when the dataset's layout is not a shipped one
+  Status validate() const;
+};
+
+struct SpeedResult {
+  std::string layout;
+  std::size_t cells = 0, rows = 0, vertices = 0, markers = 0;
+  ErrorStats solve_ms, regressor_ms, arap_ms, total_ms;  // per frame
+  std::string model;
+};
+
 struct BenchArrayOptions {
   bool uniaxial = true;
   bool string_pull = true;
@@ -67,11 +93,20 @@ struct BenchArrayOptions {
 struct BenchArrayReport {
   std::optional<UniaxialResult> uniaxial;
   std::optional<StringPullResult> string_pull;
+  std::vector<ModelSessionResult> dataset;  // empty: not run
+  std::string dataset_name;
+  std::optional<SpeedResult> speed;
   std::string json() const;
   std::string describe() const;
 };
 
 Result<UniaxialResult> bench_uniaxial(const BenchArrayOptions& options);
 Result<StringPullResult> bench_string_pull(const BenchArrayOptions& options);
+// Every model of `models` on every test session of the dataset, through the
+// live pipeline's code (OpenCV DNN, ARAP). The speed case times the first
+// model (the DNN when there is one) with the read-out's solve on the
+// dataset's layout.
+Result<std::vector<ModelSessionResult>> bench_dataset(const DatasetBenchOptions& options,
+                                                      std::optional<SpeedResult>* speed = nullptr);
 
 }  // namespace proprio::stretch_array_eval

@@ -18,7 +18,7 @@ Status LabellingOptions::validate() const {
 
 std::string LabellingOptions::describe() const {
   std::ostringstream s;
-  s << "tau_m=" << tau_m << " max_proxy_frames=" << max_proxy_frames << " warm_start_frames=" << warm_start_frames
+  s << "tau_m=" << tau_m << " continuity_frames=" << continuity_frames << " max_proxy_frames=" << max_proxy_frames << " warm_start_frames=" << warm_start_frames
     << " exclude_occupied=" << (exclude_occupied ? "yes" : "no") << " arap: " << arap.describe();
   return s.str();
 }
@@ -149,6 +149,31 @@ Result<LabellingResult> label_markers(const Eigen::MatrixX3d& rest_m, const std:
         for (std::size_t m = 0; m < M; ++m) {
           if (occupant[t][m] >= 0) free[m] = false;
         }
+      }
+    }
+    // Continuity first (gap filling; the thesis goes straight to the proxies):
+    // a track that starts shortly after a free marker was last seen, within
+    // tau of where it was, is that marker coming back into view. Proxies
+    // are least reliable exactly where markers get lost, at the sheet's
+    // moving extremities, where this needs none.
+    if (options.continuity_frames > 0 && track.seen.size() >= 2) {  // a one-frame ghost continues nothing
+      const std::size_t t0 = track.first;
+      const Eigen::Vector3d& p0 = track.seen.front().second;
+      double best_d = options.tau_m;
+      int best_m = -1;
+      for (std::size_t m = 0; m < M; ++m) {
+        if (!free[m]) continue;
+        for (std::size_t back = 1; back <= options.continuity_frames && back <= t0; ++back) {
+          if (occupant[t0 - back][m] < 0) continue;
+          const double d = (R.markers_m[t0 - back].row(static_cast<Eigen::Index>(m)).transpose() - p0).norm();
+          if (d < best_d) best_d = d, best_m = static_cast<int>(m);
+          break;
+        }
+      }
+      if (best_m >= 0) {
+        accept(tr, static_cast<std::size_t>(best_m));
+        ++R.labels_by_continuity;
+        continue;
       }
     }
     std::vector<std::size_t> usable;  // indices into track.seen

@@ -119,6 +119,24 @@ TEST(MarkerLabelling, AGhostWithinTauOfAFreeMarkerIsTakenOnlyWhenTauAllows) {
   EXPECT_EQ(r->marker_of_label.at(kGhost), 4);
 }
 
+TEST(MarkerLabelling, ShortGapsAreFilledByContinuityAndLongOnesByProxies) {
+  // Marker 10 is lost for 10 frames: its new label starts near where it was
+  // last seen, so gap filling takes it; markers 4 and 7 are lost for 20,
+  // longer than the window, and go through the proxies. Without gap filling
+  // every new label goes through the proxies, with the same answers.
+  const Scene s = make_scene();
+  const std::size_t M = s.markers.size();
+  const std::vector<InitialMatch> initial = {{1000, 0}, {1005, 5}, {1000 + static_cast<std::uint32_t>(M - 1), M - 1}};
+  for (std::size_t window : {std::size_t{16}, std::size_t{0}}) {
+    LabellingOptions o;
+    o.continuity_frames = window;
+    auto r = label_markers(s.rest, s.mesh.triangles, s.markers, s.frames, initial, o);
+    ASSERT_TRUE(r) << r.error().message;
+    for (const auto& [label, marker] : s.truth) EXPECT_EQ(r->marker_of_label.at(label), marker) << label;
+    EXPECT_EQ(r->labels_by_continuity, window > 0 ? 1u : 0u) << "window " << window;
+  }
+}
+
 TEST(MarkerLabelling, RefusesBadInitialMatches) {
   const Scene s = make_scene();
   // Marker 12 is hidden in the first frame: its label cannot be matched there.

@@ -57,6 +57,10 @@ struct InitialMatch {
 
 struct LabellingOptions {
   double tau_m = 0.025;                // the thesis's acceptance threshold
+  // Gap filling before the proxies: a track starting at most this many
+  // frames after a free marker was last seen, within tau of that position,
+  // continues it (0: off, the thesis's procedure alone).
+  std::size_t continuity_frames = 16;
   std::size_t max_proxy_frames = 12;   // per label (see the top of this file)
   std::size_t warm_start_frames = 30;  // how far a proxy may borrow another frame's solution
   bool exclude_occupied = true;
@@ -75,6 +79,7 @@ struct LabellingResult {
   std::size_t labels_seen = 0, labels_assigned = 0, labels_outlier = 0;
   std::size_t frames_complete = 0, frames_dropped = 0;  // dropped: incomplete
   std::size_t proxies_solved = 0;
+  std::size_t labels_by_continuity = 0;  // assigned by gap filling, not by proxies
   std::string describe() const;
 };
 

@@ -369,14 +369,8 @@ int run_record_glove(const RecordGloveArgs& a) {
 }  // namespace
 
 void add_stretch_glove_commands(CLI::App& app, int& exit_code) {
-  auto* rec = add_command(app, "record");
   auto rargs = std::make_shared<RecordGloveArgs>();
-  auto* r = rec->add_subcommand(
-      "glove",
-      "Record a stretch-glove training session: the read-out board's frames (USB HID) paired with a ground-truth\n"
-      "hand recorded at the same time (a .prec from a hand tracker, CLOCK_MONOTONIC timestamps), written as a\n"
-      "dataset for tools/stretch_glove (train.py, finetune.py). The first --exploration-seconds are the session's\n"
-      "min-max calibration phase.");
+  auto* r = add_command(app, "record glove");
   r->add_option("--out", rargs->out, "dataset directory to write")->required();
   r->add_option("--truth", rargs->truth, "ground-truth hand recording (.prec), made during this recording")
       ->required()

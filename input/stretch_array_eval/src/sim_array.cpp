@@ -94,6 +94,18 @@ Result<Shared> build_shared(const SimArrayOptions& o) {
   return s;
 }
 
+// The optical system at the frame rate: occlusion given in time becomes the
+// simulator's per-frame chain.
+sas::MocapOptions frame_rate_mocap(const SimArrayOptions& o) {
+  sas::MocapOptions m = o.mocap;
+  if (m.p_lose > 0.0) {
+    // share = p L / (1 + p L) for the two-state chain with mean run L frames.
+    m.mean_occluded_frames = std::max(1.0, o.mean_occlusion_s * o.frame_rate_hz);
+    m.p_lose = o.occluded_share / ((1.0 - o.occluded_share) * m.mean_occluded_frames);
+  }
+  return m;
+}
+
 struct SessionResult {
   ArrayDatasetSession data;
   SimArraySessionReport report;
@@ -120,13 +132,8 @@ Result<SessionResult> simulate_session(const SimArrayOptions& o, const Shared& s
   board->set_donning(static_cast<std::uint32_t>(plan.donning));
   auto readout = sa::make_array_readout(sh.layout);
   if (!readout) return readout.error();
-  auto mocap_options = o.mocap;
+  auto mocap_options = frame_rate_mocap(o);
   mocap_options.seed = mix(plan.seed, 4);
-  if (mocap_options.p_lose > 0.0) {
-    // share = p L / (1 + p L) for the two-state chain with mean run L frames.
-    mocap_options.mean_occluded_frames = std::max(1.0, o.mean_occlusion_s * o.frame_rate_hz);
-    mocap_options.p_lose = o.occluded_share / ((1.0 - o.occluded_share) * mocap_options.mean_occluded_frames);
-  }
   auto mocap = sas::MocapSimulator::create(sh.marker_vertices.size(), mocap_options);
   if (!mocap) return mocap.error();
 
@@ -297,7 +304,7 @@ std::string SimArrayOptions::describe() const {
                      motion, layout_file.empty() ? "the default layout" : layout_file, train_sessions, train_minutes,
                      test_sessions, test_minutes, redonned_test ? " plus one re-donned" : "", frame_rate_hz,
                      mechanics_steps_per_frame, rest_s, seed, board.describe(), 100 * occluded_share, mean_occlusion_s,
-                     mocap.describe());
+                     frame_rate_mocap(*this).describe());
 }
 
 std::string SimArrayReport::describe() const {

@@ -275,23 +275,35 @@ Status BoardOptions::validate() const {
 
 std::string BoardOptions::describe() const {
   std::ostringstream o;
-  o << "555 R1 " << timer.r1_ohm / 1e3 << " kOhm, R2 " << timer.r2_ohm / 1e3 << " kOhm, clock " << timer.reference_clock_hz / 1e6
-    << " MHz, Vcc " << supply_v << " V, seed " << seed << "; resistance "
-    << (resistance.enabled ? std::to_string(resistance.sheet_ohm_per_square) + " ohm/sq + lead " + std::to_string(resistance.lead_ohm) + " ohm" +
-                                 (resistance.longest_strip_ohm > 0 ? " scaled to a longest strip of " + std::to_string(resistance.longest_strip_ohm) + " ohm" : "")
-                           : std::string("off"))
-    << "; parasitic " << (parasitic.enabled ? "board " + std::to_string(parasitic.board_f * 1e12) + " pF, strips " +
-                                                  std::to_string(parasitic.strip_min_f * 1e12) + "-" + std::to_string(parasitic.strip_max_f * 1e12) +
-                                                  " pF, drift " + std::to_string(parasitic.drift_std_f * 1e12) + " pF"
-                                            : std::string("off"))
-    << "; rows " << (timing.enabled ? "at " + std::to_string(timing.row_rate_hz) + " /s" : std::string("simultaneous"))
-    << "; jitter " << (jitter.enabled ? std::to_string(jitter.comparator_noise_v * 1e3) + " mV" : std::string("off"))
-    << "; quantise " << (quantise ? "on" : "off") << "; broken lead "
-    << (broken_lead.enabled ? std::string(broken_lead.top ? "top " : "bottom ") + std::to_string(broken_lead.strip) + " from " +
-                                  std::to_string(broken_lead.from_s) + " s"
-                            : std::string("none"))
-    << "; over-stretch " << (over_stretch.enabled ? "beyond " + std::to_string(over_stretch.limit) + "x, gain " + std::to_string(over_stretch.gain_change) : std::string("off"))
-    << "; donning " << (donning.enabled ? "#" + std::to_string(donning.index) + ", " + std::to_string(donning.offset_std_f * 1e12) + " pF per strip" : std::string("off"));
+  o << "555 R1 " << timer.r1_ohm / 1e3 << " kOhm, R2 " << timer.r2_ohm / 1e3 << " kOhm, clock "
+    << timer.reference_clock_hz / 1e6 << " MHz, Vcc " << supply_v << " V, seed " << seed << "; resistance ";
+  if (resistance.enabled) {
+    o << resistance.sheet_ohm_per_square << " ohm/sq + lead " << resistance.lead_ohm << " ohm";
+    if (resistance.longest_strip_ohm > 0) o << " scaled to a longest strip of " << resistance.longest_strip_ohm << " ohm";
+  } else {
+    o << "off";
+  }
+  o << "; parasitic ";
+  if (parasitic.enabled) {
+    o << "board " << parasitic.board_f * 1e12 << " pF, strips " << parasitic.strip_min_f * 1e12 << "-"
+      << parasitic.strip_max_f * 1e12 << " pF, drift " << parasitic.drift_std_f * 1e12 << " pF";
+  } else {
+    o << "off";
+  }
+  o << "; rows ";
+  if (timing.enabled) o << "at " << timing.row_rate_hz << " /s"; else o << "simultaneous";
+  o << "; jitter ";
+  if (jitter.enabled) o << jitter.comparator_noise_v * 1e3 << " mV"; else o << "off";
+  o << "; quantise " << (quantise ? "on" : "off") << "; broken lead ";
+  if (broken_lead.enabled) {
+    o << (broken_lead.top ? "top " : "bottom ") << broken_lead.strip << " from " << broken_lead.from_s << " s";
+  } else {
+    o << "none";
+  }
+  o << "; over-stretch ";
+  if (over_stretch.enabled) o << "beyond " << over_stretch.limit << "x, gain " << over_stretch.gain_change; else o << "off";
+  o << "; donning ";
+  if (donning.enabled) o << "#" << donning.index << ", " << donning.offset_std_f * 1e12 << " pF per strip"; else o << "off";
   return o.str();
 }
 

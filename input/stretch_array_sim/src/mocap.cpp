@@ -24,7 +24,9 @@ Status MocapOptions::validate() const {
 std::string MocapOptions::describe() const {
   std::ostringstream o;
   o << "noise " << noise_std_m * 1e3 << " mm; occlusion "
-    << (visibility ? std::string("by the caller's hook") : "p_lose " + std::to_string(p_lose) + ", mean " + std::to_string(mean_occluded_frames) + " frames")
+    << (visibility ? std::string("by the caller's hook") : "") ;
+  if (!visibility) o << "p_lose " << p_lose << " per frame, " << mean_occluded_frames << " frames on average";
+  o
     << "; swaps within " << swap_distance_m * 1e3 << " mm at " << p_swap << " per pair-frame; ghosts " << p_ghost << " per frame within "
     << ghost_radius_m * 1e3 << " mm; seed " << seed;
   return o.str();

@@ -30,8 +30,14 @@ TEST(ArrayBench, UniaxialCellFollowsTheStageAndAnIdealBoardFollowsTheCell) {
   // Eq. 4.2 on the cell's own length: an ideal board is off only by the
   // clamps' edge effects and the rest's discretisation.
   EXPECT_LT(r->relative_length_error_ideal.mean, 0.01);
-  EXPECT_LT(r->relative_length_error.mean, 0.05);
-  EXPECT_GT(r->relative_length_error.mean, 0.0);
+  // The board's noise, counter and parasitics alone cost little; the strips'
+  // resistance, which grows with the stretch, makes it under-read more.
+  BenchArrayOptions no_r = o;
+  no_r.board.resistance.enabled = false;
+  auto without = bench_uniaxial(no_r);
+  ASSERT_TRUE(without) << without.error().message;
+  EXPECT_LT(without->relative_length_error.mean, 0.015);
+  EXPECT_GT(r->relative_length_error.mean, 2 * without->relative_length_error.mean);
   // Incompressible: the middle narrows to about 1/sqrt(1.5).
   EXPECT_NEAR(r->width_ratio_at_max, 1.0 / std::sqrt(1.5), 0.03);
 }

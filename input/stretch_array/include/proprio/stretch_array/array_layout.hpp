@@ -55,11 +55,15 @@ struct ArrayCell {
 
 // The silicone sheet the strips sit in (thesis Sec. 4.3.3 and Appendix B).
 struct SheetMaterial {
-  double dielectric_thickness_m = 0.5e-3;  // between the two conductive layers
+  // Between the two conductive layers. The thesis casts it between two
+  // layers of 65 um tape with solvent that evaporates; it gives no cured
+  // value, only the whole sheet's (~500 um) and each conductive layer's
+  // (45 um). 100 um is our estimate; it sets the absolute C0 only.
+  double dielectric_thickness_m = 0.1e-3;
   double relative_permittivity = 2.8;      // silicone dielectric
   double youngs_modulus_pa = 0.85e6;       // the thesis's silicones: 0.73-0.98 MPa
-  double poisson_ratio = 0.49;             // near-incompressible
-  double total_thickness_m = 0.5e-3 * 4;   // five layers in all, for the simulator
+  double poisson_ratio = 0.49;             // near-incompressible (the simulator's membrane is incompressible)
+  double total_thickness_m = 0.5e-3;       // the whole sheet, five layers (thesis Sec. 4.3.3): the simulator's stiffness
 };
 
 struct StripArrayLayout {

@@ -328,7 +328,9 @@ Result<std::vector<ModelSessionResult>> bench_dataset(const DatasetBenchOptions&
       if (session.split != "test") continue;
       auto regressor = sar::MarkerRegressor::load(file, C, M);
       if (!regressor) return regressor.error();
-      auto recon = sar::ArrayReconstructor::create(*mesh, *markers, std::move(*regressor));
+      sar::ArrayReconstructorOptions recon_options;
+      recon_options.rest_cylinder_radius_m = d->shape.rest_radius_m;
+      auto recon = sar::ArrayReconstructor::create(*mesh, *markers, std::move(*regressor), recon_options);
       if (!recon) return recon.error();
       ModelSessionResult r;
       r.model_kind = kind;

@@ -102,6 +102,7 @@ Status ArrayDatasetWriter::finish(const std::string& generator_json) {
   j["mesh_vertex_count"] = shape_.mesh_vertex_count;
   j["frame_rate_hz"] = shape_.frame_rate_hz;
   j["pose_name"] = shape_.pose_name;
+  j["rest_radius_m"] = shape_.rest_radius_m;
   j["frames"] = frames_;
   auto& sessions = j["sessions"] = nlohmann::ordered_json::array();
   for (const auto& s : sessions_) {
@@ -146,6 +147,10 @@ Result<ArrayDataset> load_array_dataset(const std::filesystem::path& dir) {
     d.shape.mesh_vertex_count = j.at("mesh_vertex_count").get<std::size_t>();
     d.shape.frame_rate_hz = j.at("frame_rate_hz").get<double>();
     d.shape.pose_name = j.value("pose_name", std::string());
+    d.shape.rest_radius_m = j.value("rest_radius_m", 0.0);
+    if (!std::isfinite(d.shape.rest_radius_m) || d.shape.rest_radius_m < 0.0 || d.shape.rest_radius_m > 10.0) {
+      return bad_dataset(dir, "meta.json's rest_radius_m must be 0 (flat) or a radius up to 10 m");
+    }
     for (const auto& s : j.at("sessions")) {
       d.sessions.push_back({s.at("name").get<std::string>(), s.at("motion").get<std::string>(),
                             s.at("split").get<std::string>(), s.at("donning").get<int>(),

@@ -347,7 +347,11 @@ Result<SimArrayReport> write_sim_array_dataset(const SimArrayOptions& options, c
   }
   shape.mesh_vertex_count = shared->recon.vertex_count();
   shape.frame_rate_hz = o.frame_rate_hz;
-  shape.pose_name = es::make_body(shared->body, 1)->pose_name();
+  {
+    const auto body = es::make_body(shared->body, 1);
+    shape.pose_name = body->pose_name();
+    shape.rest_radius_m = body->rest_radius_m();
+  }
   auto writer = ArrayDatasetWriter::create(o.out, shape, o.force);
   if (!writer) return writer.error();
 

@@ -17,6 +17,7 @@ ArrayDatasetShape small_shape() {
   s.mesh_vertex_count = 2;
   s.frame_rate_hz = 8.0;
   s.pose_name = "angle, degrees";
+  s.rest_radius_m = 0.04;
   return s;
 }
 
@@ -67,6 +68,7 @@ TEST(ArrayDataset, WrittenSessionsReadBackInOrder) {
   EXPECT_EQ(d->markers.shape, (std::vector<std::size_t>{5, 1, 3}));
   EXPECT_EQ(d->session.values[4], 1.0);
   EXPECT_EQ(d->shape.pose_name, "angle, degrees");
+  EXPECT_DOUBLE_EQ(d->shape.rest_radius_m, 0.04);
 }
 
 TEST(ArrayDataset, ASecondWriterAndAnUnfinishedOrDamagedDatasetAreRefused) {

@@ -32,6 +32,9 @@ struct ArrayDatasetShape {
   std::size_t mesh_vertex_count = 0;
   double frame_rate_hz = 8.0;
   std::string pose_name;  // what pose.npy holds, with its unit
+  // The rest shape S^0 the reconstruction deforms: the flat sheet wrapped on a
+  // cylinder of this radius (the body's nominal size), 0 for flat.
+  double rest_radius_m = 0.0;
 };
 
 struct ArrayDatasetSession {

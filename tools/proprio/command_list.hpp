@@ -47,6 +47,8 @@ void add_record_array_command(CLI::App& app, int& exit_code);
 void add_study_commands(CLI::App& app, int& exit_code);
 // `run SCENE`: the engine (proprio::engine).
 void add_run_command(CLI::App& app, int& exit_code);
+// `run array-demo`: a stretch array reconstructed live (proprio::stretch_array_eval).
+void add_run_array_demo_command(CLI::App& app, int& exit_code);
 void add_xr_probe_command(CLI::App& app, int& exit_code);
 // `calibrate wrist`: the engine's OpenXR session and the layer's calibration file.
 void add_calibrate_wrist_command(CLI::App& app, int& exit_code);

@@ -157,6 +157,11 @@ constexpr CommandInfo kCommands[] = {
      "frames (force one with --xr, --window or --headless). Headless runs step simulated time, so they are "
      "reproducible.",
      Family::engine, false},
+    {"run array-demo",
+     "A stretch sensor array live: a simulated wearer and the read-out board emulated over the fake USB cable, read, "
+     "solved and reconstructed (--model: a regressor from 'proprio train array'), drawn beside the simulator's true "
+     "sheet with the frame rate, latency and mean vertex error. Headless to PNG frames unless --window or --xr.",
+     Family::engine, false},
 #endif
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
     {"layer",

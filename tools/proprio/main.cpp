@@ -42,6 +42,7 @@ void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_cod
 #ifdef PROPRIO_CLI_FAMILY_ENGINE
 #ifdef PROPRIO_HAVE_ENGINE
   add_run_command(app, exit_code);
+  add_run_array_demo_command(app, exit_code);
 #endif
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
   add_xr_probe_command(app, exit_code);

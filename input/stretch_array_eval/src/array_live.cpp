@@ -68,11 +68,12 @@ Status ArrayLiveOptions::validate() const {
 
 std::string ArrayLiveOptions::describe() const {
   return fmt::format("live array: {} on {}, model {}, {} Hz plans, {} mechanics steps per frame, {} s at rest for C0, "
-                     "seed {}, cable latency {:.2f}-{:.2f} ms{}, {} ARAP iterations",
+                     "seed {}, cable latency {:.2f}-{:.2f} ms{}, {} ARAP iterations on the {} rest sheet",
                      motion, layout_file.empty() ? "the default layout" : layout_file, model.string(), frame_rate_hz,
                      mechanics_steps_per_frame, rest_s, seed, cable_latency_min_ns * 1e-6,
                      (cable_latency_min_ns + cable_latency_jitter_ns) * 1e-6,
-                     unplugs.empty() ? "" : fmt::format(", {} unplug(s)", unplugs.size()), arap_iterations);
+                     unplugs.empty() ? "" : fmt::format(", {} unplug(s)", unplugs.size()), arap_iterations,
+                     wrapped_rest_shape ? "wrapped" : "flat");
 }
 
 Result<fs::path> resolve_array_model(const fs::path& model) {
@@ -476,24 +477,21 @@ struct ArrayLiveSource::Impl {
   }
 };
 
-Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_simulated(const ArrayLiveOptions& options) {
-  if (auto st = options.validate(); !st) return st.error();
-  auto impl = std::make_unique<Impl>();
-  impl->options = options;
-  Impl& s = *impl;
-  auto body_kind = es::parse_body_kind(options.motion);
-  if (!body_kind) return body_kind.error();
+namespace {
+
+using LiveImpl = ArrayLiveSource::Impl;
+
+// The layout (the file, or the motion's shipped one), the reconstruction mesh
+// and markers, and the reconstructor with the regressor checked against them.
+Result<sar::ReconMesh> setup_reconstruction(LiveImpl& s, const ArrayLiveOptions& options, es::BodyKind body_kind) {
   if (options.layout_file.empty()) {
-    s.layout = *body_kind == es::BodyKind::biceps ? sa::StripArrayLayout::biceps_144() : sa::StripArrayLayout::prototype_92();
+    s.layout = body_kind == es::BodyKind::biceps ? sa::StripArrayLayout::biceps_144() : sa::StripArrayLayout::prototype_92();
   } else {
     auto layout = sa::StripArrayLayout::load(options.layout_file);
     if (!layout) return layout.error();
     s.layout = std::move(*layout);
   }
   if (auto st = sa::require_readable(s.layout); !st) return st.error();
-  auto sheet_mesh = sa::build_sheet_mesh(s.layout);
-  if (!sheet_mesh) return sheet_mesh.error().with_context("the simulated sheet");
-  s.sheet_mesh = std::move(*sheet_mesh);
   auto recon_mesh = sar::build_recon_mesh(s.layout);
   if (!recon_mesh) return recon_mesh.error().with_context("the reconstruction mesh");
   auto marker_vertices = sar::select_marker_vertices(*recon_mesh);
@@ -501,6 +499,86 @@ Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_simulated(const
   s.cells = s.layout.cell_count();
   s.markers = marker_vertices->size();
   s.vertices = recon_mesh->vertex_count();
+  auto model_file = resolve_array_model(options.model);
+  if (!model_file) return model_file.error();
+  auto regressor = sar::MarkerRegressor::load(*model_file, s.cells, s.markers);
+  if (!regressor) {
+    return regressor.error().with_context(fmt::format("the regressor for {} ({} cells, {} markers)", s.layout.name,
+                                                      s.cells, s.markers));
+  }
+  sar::ArrayReconstructorOptions recon_options;
+  recon_options.arap.max_iterations = options.arap_iterations;
+  if (options.wrapped_rest_shape) {
+    // The body's nominal size, as sim-array writes it into a dataset (rest_radius_m) and bench array uses it.
+    recon_options.rest_cylinder_radius_m = es::make_body(body_kind, 1)->rest_radius_m();
+  }
+  auto reconstructor = sar::ArrayReconstructor::create(*recon_mesh, std::move(*marker_vertices), std::move(*regressor),
+                                                       recon_options);
+  if (!reconstructor) return reconstructor.error();
+  s.reconstructor.emplace(std::move(*reconstructor));
+  s.c0_sum.assign(s.cells, 0.0);
+  return std::move(*recon_mesh);
+}
+
+// The host side over any transport: the reader with the rows' parasitics,
+// the driver, and the callbacks that feed the reconstruction thread.
+Status attach_host(LiveImpl& s, const ArrayLiveOptions& options, std::unique_ptr<hid::HidTransport> transport,
+                   std::vector<double> row_parasitic_pf) {
+  dev::StretchArrayReaderOptions reader_options;
+  reader_options.row_parasitic_pf = std::move(row_parasitic_pf);
+  auto reader = dev::StretchArrayReader::create(s.layout, reader_options);
+  if (!reader) return reader.error();
+  s.reader.emplace(std::move(*reader));
+  dev::StretchDeviceOptions device_options;
+  device_options.read_timeout_ns = options.read_timeout_ns;
+  device_options.reconnect_backoff_min_ns = options.reconnect_backoff_min_ns;
+  device_options.reconnect_backoff_max_ns = options.reconnect_backoff_max_ns;
+  device_options.stream = s.reader->stream_options();
+  s.device = std::make_unique<dev::StretchDevice>(std::move(transport), device_options);
+  s.burst.reserve(dev::kStretchMaxBurst * dev::kStretchMeasurementsPerReport);
+  LiveImpl* ip = &s;
+  s.device->set_sample_callback([ip](const dev::StretchSample& sample) { ip->burst.push_back(sample); });
+  s.device->set_burst_callback([ip] { ip->on_burst(); });
+  s.device->set_state_callback([ip](hid::LinkState state, std::string_view) {
+    const hid::LinkState before = ip->link_state.exchange(state);
+    if (before == hid::LinkState::streaming && state == hid::LinkState::disconnected) ++ip->disconnects;
+  });
+  return {};
+}
+
+}  // namespace
+
+Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_usb(const ArrayLiveOptions& options,
+                                                                    std::vector<double> row_parasitic_pf,
+                                                                    const std::string& hid_path) {
+  if (auto st = options.validate(); !st) return st.error();
+  auto impl = std::make_unique<Impl>();
+  impl->options = options;
+  auto body_kind = es::parse_body_kind(options.motion);
+  if (!body_kind) return body_kind.error();
+  auto mesh = setup_reconstruction(*impl, options, *body_kind);
+  if (!mesh) return mesh.error();
+  hid::HidDeviceSelector selector = dev::stretch_board_selector();
+  selector.path = hid_path;
+  if (auto st = attach_host(*impl, options, std::make_unique<hid::HidapiTransport>(selector), std::move(row_parasitic_pf));
+      !st) {
+    return st.error();
+  }
+  return std::unique_ptr<ArrayLiveSource>(new ArrayLiveSource(std::move(impl)));
+}
+
+Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_simulated(const ArrayLiveOptions& options) {
+  if (auto st = options.validate(); !st) return st.error();
+  auto impl = std::make_unique<Impl>();
+  impl->options = options;
+  Impl& s = *impl;
+  auto body_kind = es::parse_body_kind(options.motion);
+  if (!body_kind) return body_kind.error();
+  auto recon_mesh = setup_reconstruction(s, options, *body_kind);
+  if (!recon_mesh) return recon_mesh.error();
+  auto sheet_mesh = sa::build_sheet_mesh(s.layout);
+  if (!sheet_mesh) return sheet_mesh.error().with_context("the simulated sheet");
+  s.sheet_mesh = std::move(*sheet_mesh);
 
   // Reconstruction-mesh vertices as material points of the simulated sheet
   // (as sim-array's truth): a boundary vertex is looked up a micrometre inward.
@@ -514,25 +592,6 @@ Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_simulated(const
     if (!point) return point.error().with_context("a reconstruction vertex outside the simulated sheet");
     s.recon_points.push_back(*point);
   }
-
-  // The regressor and the reconstructor.
-  auto model_file = resolve_array_model(options.model);
-  if (!model_file) return model_file.error();
-  auto regressor = sar::MarkerRegressor::load(*model_file, s.cells, s.markers);
-  if (!regressor) {
-    return regressor.error().with_context(fmt::format("the regressor for {} ({} cells, {} markers)", s.layout.name,
-                                                      s.cells, s.markers));
-  }
-  sar::ArrayReconstructorOptions recon_options;
-  recon_options.arap.max_iterations = options.arap_iterations;
-  if (options.wrapped_rest_shape) {
-    recon_options.rest_cylinder_radius_m = es::make_body(*body_kind, mix_seed(options.seed, 1))->rest_radius_m();
-  }
-  auto reconstructor = sar::ArrayReconstructor::create(*recon_mesh, std::move(*marker_vertices), std::move(*regressor),
-                                                       recon_options);
-  if (!reconstructor) return reconstructor.error();
-  s.reconstructor.emplace(std::move(*reconstructor));
-  s.c0_sum.assign(s.cells, 0.0);
 
   // The board's rate: one plan per frame.
   auto plan = dev::stretch_array_plan(s.layout);
@@ -583,13 +642,6 @@ Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_simulated(const
       *w.array, frame_s / options.mechanics_steps_per_frame);
   if (auto st = w.timeline->start(); !st) return st.error();
 
-  // The host's reader.
-  dev::StretchArrayReaderOptions reader_options;
-  reader_options.row_parasitic_pf = std::move(row_parasitic_pf);
-  auto reader = dev::StretchArrayReader::create(s.layout, reader_options);
-  if (!reader) return reader.error();
-  s.reader.emplace(std::move(*reader));
-
   // The board's firmware, its provider the wearer.
   dev::StretchEmulatorOptions base;
   base.rate_hz = static_cast<std::uint16_t>(rate);
@@ -609,19 +661,10 @@ Result<std::unique_ptr<ArrayLiveSource>> ArrayLiveSource::create_simulated(const
   serve.seed = mix_seed(options.seed, 6);
   s.server = std::make_unique<dev::StretchEmulatorServer>(std::move(*emulator), s.link, serve);
 
-  dev::StretchDeviceOptions device_options;
-  device_options.read_timeout_ns = options.read_timeout_ns;
-  device_options.reconnect_backoff_min_ns = options.reconnect_backoff_min_ns;
-  device_options.reconnect_backoff_max_ns = options.reconnect_backoff_max_ns;
-  device_options.stream = s.reader->stream_options();
-  s.device = std::make_unique<dev::StretchDevice>(std::make_unique<hid::FakeHidTransport>(s.link), device_options);
-  s.burst.reserve(dev::kStretchMaxBurst * dev::kStretchMeasurementsPerReport);
-  s.device->set_sample_callback([ip](const dev::StretchSample& sample) { ip->burst.push_back(sample); });
-  s.device->set_burst_callback([ip] { ip->on_burst(); });
-  s.device->set_state_callback([ip](hid::LinkState state, std::string_view) {
-    const hid::LinkState before = ip->link_state.exchange(state);
-    if (before == hid::LinkState::streaming && state == hid::LinkState::disconnected) ++ip->disconnects;
-  });
+  if (auto st = attach_host(s, options, std::make_unique<hid::FakeHidTransport>(s.link), std::move(row_parasitic_pf));
+      !st) {
+    return st.error();
+  }
   return std::unique_ptr<ArrayLiveSource>(new ArrayLiveSource(std::move(impl)));
 }
 
@@ -633,12 +676,16 @@ Status ArrayLiveSource::start() {
   if (s.started) return make_error(Errc::invalid_argument, "the live array source is already started (or was stopped)");
   s.started = true;
   s.recon_thread = std::thread([&s] { s.recon_loop(); });
-  s.wearer->thread = std::thread([&s] { s.wearer_loop(); });
-  s.server->start();
-  s.t0_host_ns = s.server->time_zero_ns();
-  // The cable comes out with the board's outages: the host sees the handle die.
-  for (const auto& outage : s.options.unplugs) {
-    s.link->schedule_unplug(s.t0_host_ns + outage.at_ns, outage.duration_ns);
+  if (s.server) {
+    s.wearer->thread = std::thread([&s] { s.wearer_loop(); });
+    s.server->start();
+    s.t0_host_ns = s.server->time_zero_ns();
+    // The cable comes out with the board's outages: the host sees the handle die.
+    for (const auto& outage : s.options.unplugs) {
+      s.link->schedule_unplug(s.t0_host_ns + outage.at_ns, outage.duration_ns);
+    }
+  } else {
+    s.t0_host_ns = MonotonicClock::instance().now_ns();  // a real board: the rest starts now
   }
   if (auto st = s.device->start(); !st) {
     stop();

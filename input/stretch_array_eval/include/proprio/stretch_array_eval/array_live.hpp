@@ -32,12 +32,13 @@
 // rest_s seconds of streaming, when the wearer holds still. Until then
 // latest() says calibrating.
 //
-// A real board. Everything after the transport is the same: the source is
-// built around a hid::HidTransport; create_simulated() gives it the fake
-// link with the emulator on the other end. A USB board would pass a
-// hid::HidapiTransport for devices::stretch_board_selector() and row
-// parasitics recorded with the sheet flat (not wired yet: there is no
-// calibration file format for an array's rows; see the report of issue 30).
+// A real board. Everything after the transport is the same: create_usb()
+// reads a stretch board on USB (hidapi, stretch_board_selector(), or one
+// hidraw node) with row parasitics the caller recorded with the sheet flat
+// (StretchRowMeans + row_parasitics_at_rest in stretch_array_reader.hpp;
+// there is no file format for them yet), and takes C0 over the first rest_s
+// seconds after start(). It has no truth. Tested only without a board (the
+// link keeps trying and latest() says so); not run against hardware.
 //
 // The truth. For a simulated wearer the emulator thread also records the
 // sheet's true reconstruction-mesh vertices (material points, as sim-array
@@ -95,9 +96,10 @@ struct ArrayLiveOptions {
   DurationNs reconnect_backoff_min_ns = 50 * kNsPerMillisecond;
   DurationNs reconnect_backoff_max_ns = 2 * kNsPerSecond;
   int arap_iterations = 4;  // local-global iterations per frame (ArrayReconstructorOptions)
-  // The rest mesh S^0 ARAP deforms: flat (as `proprio bench array`), or
-  // wrapped on a cylinder of the body's rest radius (rest_shape()).
-  bool wrapped_rest_shape = false;
+  // The rest mesh S^0 ARAP deforms: wrapped on a cylinder of the body's
+  // nominal rest radius (rest_shape(); what sim-array datasets carry and
+  // `proprio bench array` deforms), or the flat sheet.
+  bool wrapped_rest_shape = true;
 
   Status validate() const;
   std::string describe() const;
@@ -155,6 +157,14 @@ class ArrayLiveSource {
   // and calibrates (flat sheet) without starting any thread. Errors name what
   // is wrong (layout, model sizes, options).
   static Result<std::unique_ptr<ArrayLiveSource>> create_simulated(const ArrayLiveOptions& options);
+  // A board on USB: options' layout_file (or the motion's shipped layout),
+  // model, rest_s, driver and ARAP settings apply; the wearer, board and
+  // unplug settings do not. row_parasitic_pf: per plan row (pF, after the
+  // board's own subtraction), empty for none. hid_path: a hidraw node, or
+  // empty for the first stretch board found.
+  static Result<std::unique_ptr<ArrayLiveSource>> create_usb(const ArrayLiveOptions& options,
+                                                            std::vector<double> row_parasitic_pf,
+                                                            const std::string& hid_path = {});
   ~ArrayLiveSource();  // stop()s
   ArrayLiveSource(const ArrayLiveSource&) = delete;
   ArrayLiveSource& operator=(const ArrayLiveSource&) = delete;
@@ -172,7 +182,7 @@ class ArrayLiveSource {
   std::size_t vertex_count() const noexcept;
   std::size_t cell_count() const noexcept;
   std::size_t marker_count() const noexcept;
-  // Host time of the board's time zero (valid after start()).
+  // Host time of the board's time zero (valid after start(); USB: when start() was called).
   TimeNs time_zero_ns() const;
 
   struct Impl;

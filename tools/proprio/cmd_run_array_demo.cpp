@@ -43,12 +43,13 @@ struct DemoArgs {
   RunArgs run;  // output, size, fps, camera, renderer
 };
 
-// Both windings, so the sheet shows from either side whatever the renderer culls.
-std::vector<std::uint32_t> two_sided(const stretch_array_recon::ReconMesh& mesh) {
+// The renderer draws both faces of every triangle (no culling) and lights
+// the back face by its own side, so each triangle once: a reversed copy
+// would fight the first in the depth buffer and cancel the vertex normals.
+std::vector<std::uint32_t> triangle_indices(const stretch_array_recon::ReconMesh& mesh) {
   std::vector<std::uint32_t> t;
-  t.reserve(mesh.triangles.size() * 6);
+  t.reserve(mesh.triangles.size() * 3);
   for (const auto& tri : mesh.triangles) t.insert(t.end(), {tri[0], tri[1], tri[2]});
-  for (const auto& tri : mesh.triangles) t.insert(t.end(), {tri[0], tri[2], tri[1]});
   return t;
 }
 
@@ -58,7 +59,8 @@ std::string hud_line(const sae::ArrayLiveSnapshot& snap) {
   if (s.calibrating) return fmt::format("hold still: taking C0 ({} rest frames)", s.rest_frames);
   if (!snap.frame) return "reconstructing...";
   const auto& f = *snap.frame;
-  return fmt::format("{:.0f} frames/s  latency {:.0f} ms  error {:.1f} mm", s.frame_rate_hz, 1e3 * f.latency_s,
+  // Short: the prompt is drawn large and must fit a 640-pixel view.
+  return fmt::format("{:.0f} fps  {:.0f} ms  error {:.1f} mm", s.frame_rate_hz, 1e3 * f.latency_s,
                      std::isfinite(f.mean_error_m) ? 1e3 * f.mean_error_m : std::numeric_limits<double>::quiet_NaN());
 }
 
@@ -94,7 +96,7 @@ int run_demo(DemoArgs d) {
   auto scene = engine::Scene::preset("empty");
   if (!scene) return report_error(scene.error());
   engine::AppInputs in;
-  const auto triangles = two_sided(live.mesh());
+  const auto triangles = triangle_indices(live.mesh());
   in.surfaces.push_back({"reconstructed sheet", triangles, live.vertex_count(), {0.9f, 0.55f, 0.25f, 1.0f}});
   in.surfaces.push_back({"true sheet (simulator)", triangles, live.vertex_count(), {0.45f, 0.6f, 0.8f, 1.0f}});
 

@@ -1,4 +1,5 @@
 #include "proprio/stretch_array_eval/array_live.hpp"
+#include "proprio/stretch_array_eval/sim_array.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -484,14 +485,9 @@ using LiveImpl = ArrayLiveSource::Impl;
 // The layout (the file, or the motion's shipped one), the reconstruction mesh
 // and markers, and the reconstructor with the regressor checked against them.
 Result<sar::ReconMesh> setup_reconstruction(LiveImpl& s, const ArrayLiveOptions& options, es::BodyKind body_kind) {
-  if (options.layout_file.empty()) {
-    s.layout = body_kind == es::BodyKind::biceps ? sa::StripArrayLayout::biceps_144() : sa::StripArrayLayout::prototype_92();
-  } else {
-    auto layout = sa::StripArrayLayout::load(options.layout_file);
-    if (!layout) return layout.error();
-    s.layout = std::move(*layout);
-  }
-  if (auto st = sa::require_readable(s.layout); !st) return st.error();
+  auto layout = layout_for_motion(options.layout_file, es::to_string(body_kind));
+  if (!layout) return layout.error();
+  s.layout = std::move(*layout);
   auto recon_mesh = sar::build_recon_mesh(s.layout);
   if (!recon_mesh) return recon_mesh.error().with_context("the reconstruction mesh");
   auto marker_vertices = sar::select_marker_vertices(*recon_mesh);

@@ -61,14 +61,9 @@ Result<Shared> build_shared(const SimArrayOptions& o) {
   auto body = es::parse_body_kind(o.motion);
   if (!body) return body.error();
   s.body = *body;
-  if (o.layout_file.empty()) {
-    s.layout = s.body == es::BodyKind::biceps ? sa::StripArrayLayout::biceps_144() : sa::StripArrayLayout::prototype_92();
-  } else {
-    auto layout = sa::StripArrayLayout::load(o.layout_file);
-    if (!layout) return layout.error();
-    s.layout = std::move(*layout);
-  }
-  if (auto st = sa::require_readable(s.layout); !st) return st.error();
+  auto layout = layout_for_motion(o.layout_file, o.motion);
+  if (!layout) return layout.error();
+  s.layout = std::move(*layout);
   auto mesh = sa::build_sheet_mesh(s.layout);
   if (!mesh) return mesh.error().with_context("the simulated sheet");
   s.sheet_mesh = std::move(*mesh);
@@ -270,6 +265,19 @@ Result<SessionResult> simulate_session(const SimArrayOptions& o, const Shared& s
 }
 
 }  // namespace
+
+Result<sa::StripArrayLayout> layout_for_motion(const std::string& layout_file, const std::string& motion) {
+  sa::StripArrayLayout layout;
+  if (layout_file.empty()) {
+    layout = motion == "biceps" ? sa::StripArrayLayout::biceps_144() : sa::StripArrayLayout::prototype_92();
+  } else {
+    auto loaded = sa::StripArrayLayout::load(layout_file);
+    if (!loaded) return loaded.error();
+    layout = std::move(*loaded);
+  }
+  if (auto st = sa::require_readable(layout); !st) return st.error();
+  return layout;
+}
 
 Status SimArrayOptions::validate() const {
   if (auto body = es::parse_body_kind(motion); !body) return body.error();

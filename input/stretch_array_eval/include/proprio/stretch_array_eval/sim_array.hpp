@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "proprio/core/result.hpp"
+#include "proprio/stretch_array/array_layout.hpp"
 #include "proprio/stretch_array_sim/array_electrical.hpp"
 #include "proprio/stretch_array_sim/mocap.hpp"
 
@@ -78,6 +79,11 @@ struct SimArrayReport {
 struct SimArrayCallbacks {
   std::function<void(double simulated_minutes_done)> on_progress;  // from the calling thread
 };
+
+// The array a motion is captured with: the layout file when one is given,
+// else the thesis's sensors' stand-ins (biceps_144 for the biceps, prototype_92
+// otherwise), checked to be readable.
+Result<stretch_array::StripArrayLayout> layout_for_motion(const std::string& layout_file, const std::string& motion);
 
 Result<SimArrayReport> write_sim_array_dataset(const SimArrayOptions& options, const SimArrayCallbacks& callbacks = {});
 

@@ -171,9 +171,10 @@ void add_stretch_array_commands(CLI::App& app, int& exit_code) {
   auto bargs = std::make_shared<BenchArrayArgs>();
   auto& b = bargs->options;
   CLI::App* bench = add_command(app, "bench array");
-  bench->add_option("--cases", bargs->cases, "Which cases (comma-separated): uniaxial, string-pull")
+  bench->add_option("--cases", bargs->cases,
+                    "Which flat cases (comma-separated): uniaxial, string-pull, or none (with --dataset alone)")
       ->delimiter(',')
-      ->check(CLI::IsMember({"uniaxial", "string-pull"}))
+      ->check(CLI::IsMember({"uniaxial", "string-pull", "none"}))
       ->capture_default_str();
   bench->add_option("--max-stretch", b.uniaxial_max_stretch, "Uniaxial: the stage's largest l/l0")
       ->check(CLI::Range(1.05, 3.0))

@@ -62,7 +62,7 @@ TEST_P(EveryBody, SurfaceIsRegularOutwardAndProjectable) {
   ASSERT_NE(body, nullptr);
   const es::Vec2 site = body->default_site_uv_m();
   for (double t : {0.0, 2.5, 7.0, 13.0}) {
-    for (const es::Vec2 d : {es::Vec2(0.0, 0.0), es::Vec2(0.03, 0.04), es::Vec2(-0.05, -0.06)}) {
+    for (const es::Vec2& d : {es::Vec2(0.0, 0.0), es::Vec2(0.03, 0.04), es::Vec2(-0.05, -0.06)}) {
       const es::Vec2 uv = site + d;
       const es::Vec3 x = body->skin_point_m(uv, t);
       const es::Mat32 j = body->skin_jacobian(uv, t);
@@ -89,7 +89,7 @@ TEST_P(EveryBody, SurfaceIsRegularOutwardAndProjectable) {
     // is straight only at rest, t = 0).
     const bool jointed = GetParam() == es::BodyKind::elbow || GetParam() == es::BodyKind::wrist;
     if (t == 0.0 || !jointed) {
-      for (const es::Vec2 d : {es::Vec2(0.0, 0.0), es::Vec2(0.05, 0.02), es::Vec2(-0.07, -0.05)}) {
+      for (const es::Vec2& d : {es::Vec2(0.0, 0.0), es::Vec2(0.05, 0.02), es::Vec2(-0.07, -0.05)}) {
         const es::Vec3 x = body->skin_point_m(site + d, t);
         EXPECT_GT(body->normal(site + d, t).dot(x - es::Vec3(0.0, 0.0, x.z())), 0.0);
       }
@@ -118,4 +118,4 @@ TEST_P(EveryBody, PoseValueStaysInItsDocumentedRange) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Bodies, EveryBody, ::testing::ValuesIn(es::all_body_kinds()),
-                         [](const auto& info) { return std::string(es::to_string(info.param)); });
+                         [](const auto& test) { return std::string(es::to_string(test.param)); });

@@ -141,4 +141,4 @@ TEST_P(SheetOnEveryBody, RunsHundredsOfStepsWithBoundedStretch) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Bodies, SheetOnEveryBody, ::testing::ValuesIn(es::all_body_kinds()),
-                         [](const auto& info) { return std::string(es::to_string(info.param)); });
+                         [](const auto& test) { return std::string(es::to_string(test.param)); });

@@ -166,7 +166,7 @@ TEST(MaterialPoints, FollowAffineMotionExactlyAndRefuseOutsidePoints) {
   const es::Vec3 b(0.01, -0.02, 0.05);
   std::vector<es::Vec3> x;
   for (const auto& p : mesh->vertices_m) x.push_back(a * p + b);
-  for (const Eigen::Vector2d p : {Eigen::Vector2d(0.0071, 0.0133), Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(0.02, 0.03)}) {
+  for (const Eigen::Vector2d& p : {Eigen::Vector2d(0.0071, 0.0133), Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(0.02, 0.03)}) {
     auto mp = es::locate_material_point(*mesh, p);
     ASSERT_TRUE(mp.ok()) << mp.error().message;
     EXPECT_NEAR((es::material_point_position_m(*mesh, x, *mp) - (a * p + b)).norm(), 0.0, 1e-12);

@@ -22,6 +22,12 @@ set(CMAKE_SKIP_INSTALL_ALL_DEPENDENCY ON)
 # the binary it is linked into, so it needs the datadir relative to the prefix
 # (an absolute one is taken as it is).
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/ DESTINATION ${CMAKE_INSTALL_DATADIR}/proprio)
+# The training scripts `proprio train array` runs (the stretch array's import
+# the stretch glove's), without their tests: <datadir>/proprio/tools/.
+foreach(_proprio_tool stretch_array stretch_glove)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/tools/${_proprio_tool} DESTINATION ${CMAKE_INSTALL_DATADIR}/proprio/tools
+          FILES_MATCHING PATTERN "*.py" PATTERN "README.md" PATTERN "tests" EXCLUDE PATTERN "__pycache__" EXCLUDE)
+endforeach()
 target_compile_definitions(proprio_core PRIVATE PROPRIO_INSTALL_DATADIR="${CMAKE_INSTALL_DATADIR}")
 
 # --- the OpenXR layer ----------------------------------------------------------

@@ -84,22 +84,29 @@ TEST(EngineHeadless, WithoutHapticsTheTrackedHandIsDrawnAsIs) {
   EXPECT_EQ(run.report.peak_fingertip_force_n, 0.0);
 }
 
-// A deforming surface from the frame hook: a square ahead of the eyes that
-// slides from the left half of the view to the right half.
-TEST(EngineHeadless, FrameHookMovesADeformingSurface) {
-  auto scene = Scene::preset("empty");
-  ASSERT_TRUE(scene);
+// A small mono headless run without the HUD, for the frame-hook tests,
+// writing into a fresh folder.
+AppOptions small_hook_run(int frames, const char* name) {
   AppOptions o;
   o.output = OutputMode::headless;
   o.width = 160;
   o.height = 90;
   o.stereo = false;
-  o.frames = 2;
+  o.frames = frames;
   o.software_renderer = true;
   o.validation = true;
   o.hud = false;
-  o.out_dir = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / "engine_surface";
+  o.out_dir = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / name;
   std::filesystem::remove_all(o.out_dir);
+  return o;
+}
+
+// A deforming surface from the frame hook: a square ahead of the eyes that
+// slides from the left half of the view to the right half.
+TEST(EngineHeadless, FrameHookMovesADeformingSurface) {
+  auto scene = Scene::preset("empty");
+  ASSERT_TRUE(scene);
+  const AppOptions o = small_hook_run(2, "engine_surface");
   AppInputs in;
   in.surfaces.push_back({"sheet", {0, 1, 2, 0, 2, 3}, 4, {1, 0.2f, 0.2f, 1}});
   in.on_frame = [&](FrameContext& c) {
@@ -134,17 +141,7 @@ TEST(EngineHeadless, FrameHookMovesADeformingSurface) {
 TEST(EngineHeadless, FrameHookBlacksOutTheSceneDrawsMarkersAndStops) {
   auto scene = Scene::preset("half-cylinder");
   ASSERT_TRUE(scene);
-  AppOptions o;
-  o.output = OutputMode::headless;
-  o.width = 160;
-  o.height = 90;
-  o.stereo = false;
-  o.frames = 10;
-  o.software_renderer = true;
-  o.validation = true;
-  o.hud = false;
-  o.out_dir = std::filesystem::path(PROPRIO_GOLDEN_OUT_DIR) / "engine_hook";
-  std::filesystem::remove_all(o.out_dir);
+  const AppOptions o = small_hook_run(10, "engine_hook");
   AppInputs in;
   int calls = 0;
   Pose head_seen;

@@ -50,6 +50,9 @@ void add_run_command(CLI::App& app, int& exit_code);
 // `run array-demo`: a stretch array reconstructed live (proprio::stretch_array_eval).
 void add_run_array_demo_command(CLI::App& app, int& exit_code);
 void add_xr_probe_command(CLI::App& app, int& exit_code);
+// `rig example|plan|emulate|live` and `bench rig`: the modular rig device (issue 31).
+void add_rig_commands(CLI::App& app, int& exit_code);
+void add_bench_rig_command(CLI::App& app, int& exit_code);
 // `calibrate wrist`: the engine's OpenXR session and the layer's calibration file.
 void add_calibrate_wrist_command(CLI::App& app, int& exit_code);
 

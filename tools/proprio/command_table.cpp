@@ -162,6 +162,31 @@ constexpr CommandInfo kCommands[] = {
      "solved and reconstructed (--model: a regressor from 'proprio train array'), drawn beside the simulator's true "
      "sheet with the frame rate, latency and mean vertex error. Headless to PNG frames unless --window or --xr.",
      Family::engine, false},
+    {"rig",
+     "The modular rig device (docs/rig-device.md): plan a device of Hall-sensor joints and splitters for a glTF "
+     "character ('rig plan'), emulate it on its fault-tolerant bus ('rig emulate'), pose the character with it "
+     "('rig live'), or write an example character ('rig example')",
+     Family::engine, true},
+    {"rig example", "Write one of the example characters (humanoid, quadruped, creature) with its sample poses as glTF",
+     Family::engine, false},
+    {"rig plan",
+     "Pick where a kit's joints and splitters go on a skinned glTF character from its sample poses (greedy joints with "
+     "the reachability fit, splitters by an ILP with COIN-OR CBC) and write plan.json, assembly instructions "
+     "(assembly.txt, assembly.svg) and the error curve (error_curve.svg)",
+     Family::engine, false},
+    {"rig emulate",
+     "Run a plan's device on the emulated bus (message loss and corruption, link power losses, clock skew), read it "
+     "through the real driver on the fake USB cable, and print the topology and angles the host sees",
+     Family::engine, false},
+    {"rig live",
+     "Pose a character from the device (emulated with bus faults, or a base on USB): topology bound to the plan, "
+     "joints retargeted, the rest by pose-space interpolation; drawn by the engine (headless PNG frames unless "
+     "--window or --xr) and recorded with --record",
+     Family::engine, false},
+    {"bench rig",
+     "The rig device's targets on simulated data: joint angles through Hall sensors and calibration, rig reduction "
+     "on the example characters, the bus under faults, and the simulated posing task (ours against twist-bend-twist)",
+     Family::engine, false},
 #endif
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
     {"layer",

@@ -43,6 +43,10 @@ void add_commands([[maybe_unused]] CLI::App& app, [[maybe_unused]] int& exit_cod
 #ifdef PROPRIO_HAVE_ENGINE
   add_run_command(app, exit_code);
   add_run_array_demo_command(app, exit_code);
+#ifdef PROPRIO_HAVE_RIG
+  add_rig_commands(app, exit_code);
+  add_bench_rig_command(app, exit_code);
+#endif
 #endif
 #ifdef PROPRIO_HAVE_OPENXR_LAYER
   add_xr_probe_command(app, exit_code);

@@ -411,19 +411,18 @@ int run_live(LiveArgs d) {
   const bool show_truth = d.device == "emulate" && !d.no_truth;
   if (show_truth) in.surfaces.push_back({character.name + " (animator's truth)", triangles, nv, {0.45f, 0.6f, 0.8f, 1.0f}});
 
-  // The character stands in front of the viewer, scaled to a fixed height.
-  double height_m = 1.0;
-  {
-    std::vector<Pose> T;
-    forward_kinematics(character.skeleton, rest_pose(character.skeleton), T);
-    double lo_y = 1e9, hi_y = -1e9;
-    for (const auto& v : character.mesh.vertices) {
-      lo_y = std::min<double>(lo_y, v.position.y);
-      hi_y = std::max<double>(hi_y, v.position.y);
-    }
-    height_m = std::max(0.05, hi_y - lo_y);
+  // The character stands in front of the viewer, its width or height at rest
+  // (whichever is larger; depth does not show) scaled to 0.7 m, its feet on
+  // a common floor.
+  Eigen::Vector3d lo_m = Eigen::Vector3d::Constant(1e30), hi_m = Eigen::Vector3d::Constant(-1e30);
+  for (const auto& v : character.mesh.vertices) {
+    const Eigen::Vector3d p(v.position.x, v.position.y, v.position.z);
+    lo_m = lo_m.cwiseMin(p);
+    hi_m = hi_m.cwiseMax(p);
   }
-  const double scale = 0.45 / height_m;
+  const double scale = 0.7 / std::max({0.05, hi_m.x() - lo_m.x(), hi_m.y() - lo_m.y()});
+  const Vec3 p_stage_char(-0.5 * (lo_m.x() + hi_m.x()), -lo_m.y(), -0.5 * (lo_m.z() + hi_m.z()));
+  const double side_gap_m = 0.55 * scale * (hi_m.x() - lo_m.x()) + 0.05;
   std::optional<Pose> T_world_stage;
   std::vector<Pose> T_world_node;
   std::vector<glm::mat4> skin;
@@ -446,15 +445,15 @@ int run_live(LiveArgs d) {
       c.stop = true;
       return;
     }
-    if (!T_world_stage) T_world_stage = c.T_world_head * Pose{Quat::Identity(), Vec3(0.0, -0.25, -0.9)};
+    if (!T_world_stage) T_world_stage = c.T_world_head * Pose{Quat::Identity(), Vec3(0.0, -0.38, -0.9)};
     auto place = [&](const SkeletonPose& pose, double side, std::vector<Vec3>& out) {
       forward_kinematics(character.skeleton, pose, T_world_node);
       render::skin_character(character, T_world_node, skin, skinned);
       out.resize(skinned.size());
-      const Vec3 offset(side * 0.3, 0.0, 0.0);
+      const Vec3 offset(side * side_gap_m, 0.0, 0.0);
       for (std::size_t i = 0; i < skinned.size(); ++i) {
         const Vec3 p(skinned[i].position.x, skinned[i].position.y, skinned[i].position.z);
-        out[i] = *T_world_stage * (offset + scale * p);
+        out[i] = *T_world_stage * (offset + scale * (p + p_stage_char));
       }
     };
     c.surfaces.resize(show_truth ? 2 : 1);

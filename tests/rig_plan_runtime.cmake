@@ -9,6 +9,7 @@ if(PROPRIO_BUILD_TESTS AND TARGET proprio::rig_plan)
       unit/input/rig_plan/test_plan_io.cpp
       unit/input/rig_plan/test_binding.cpp
       unit/input/rig_plan/test_assembly.cpp
+      unit/input/rig_plan/test_joint_ranges.cpp
     DEPS proprio::rig_plan nlohmann_json::nlohmann_json)
 endif()
 if(TARGET proprio::rig_plan)

@@ -28,6 +28,7 @@
 #include "proprio/rig_device/kit.hpp"
 #include "proprio/rig_live/rig_live.hpp"
 #include "proprio/rig_plan/assembly.hpp"
+#include "proprio/rig_plan/joint_ranges.hpp"
 #include "proprio/rig_plan/plan_io.hpp"
 #include "proprio/rig_plan/rig_reduction.hpp"
 #include "rig_common.hpp"
@@ -70,6 +71,7 @@ struct PlanArgs {
   std::string kit;
   int joints = -1;
   bool no_splitters = false;
+  bool exact_rest = false;
   bool force = false;
 };
 
@@ -101,6 +103,7 @@ int run_plan(const PlanArgs& a) {
   rig_plan::ReductionOptions ro;
   ro.max_joints = a.joints;
   ro.use_splitters = !a.no_splitters;
+  ro.center_joint_ranges = !a.exact_rest;
   if (auto st = ro.validate(); !st) return report_error(st.error());
   std::printf("%s: %zu bones, %zu sample poses\n%s\n%s\n", input.name.c_str(), input.skeleton.size(),
               input.samples.size(), kit.describe().c_str(), ro.describe().c_str());
@@ -148,6 +151,12 @@ int run_plan(const PlanArgs& a) {
               plan->error_rigid, reduction_at(5).c_str(), reduction_at(10).c_str(), plan->joint_count(),
               plan->splitter_count(), plan->error_final,
               plan->error_rigid > 0 ? 100.0 * (1.0 - plan->error_final / plan->error_rigid) : 0.0);
+  const auto ranges = rig_plan::joint_range_report(*plan);
+  if (ranges.joints_past_stop > 0)
+    std::printf("joints that cannot reach every sample pose (their bones follow as far as the stop allows):\n%s",
+                ranges.describe(*plan).c_str());
+  else
+    std::printf("every joint reaches every sample pose within its %.0f deg stop\n", ranges.limit_rad * 180.0 / M_PI);
   std::printf("planned in %.2f s\nwrote %s/{plan.json, assembly.txt, assembly.svg, error_curve.svg}\n", seconds,
               a.out.c_str());
   return 0;
@@ -579,6 +588,8 @@ void add_rig_commands(CLI::App& app, int& exit_code) {
     cmd->add_option("--kit", a->kit, "the kit (TOML; default: the thesis's 18 joints and 7 splitters)");
     cmd->add_option("--joints", a->joints, "use at most this many of the kit's joints")->check(CLI::Range(1, 256));
     cmd->add_flag("--no-splitters", a->no_splitters, "joints only, on one chain");
+    cmd->add_flag("--exact-rest", a->exact_rest, "joints' rest settings copy the rig at rest, even past their stops "
+                                                  "(default: centred in their range where the stops need it)");
     cmd->add_flag("--force", a->force, "replace a plan already in --out");
     cmd->callback([a, &exit_code] { exit_code = run_plan(*a); });
   }

@@ -72,16 +72,62 @@ std::string RigLiveOptions::describe() const {
   return s;
 }
 
+Result<SnapshotPoser> SnapshotPoser::create(const rig_plan::RigInput& input, const rig_plan::Plan& plan,
+                                            const rig_plan::RetargetOptions& options, double stale_after_s) {
+  auto retargeter = rig_plan::Retargeter::create(input, plan, options);
+  if (!retargeter) return retargeter.error();
+  return SnapshotPoser(plan, std::move(*retargeter), stale_after_s);
+}
+
+Status SnapshotPoser::pose(const BusSnapshot& snap, RigLiveFrame& frame) {
+  observed_.clear();
+  frame.components_attached = 0;
+  for (const auto& c : snap.components) {
+    if (!c.attached) continue;
+    ++frame.components_attached;
+    if (c.kind == ComponentKind::base || c.id == snap.base_id) continue;
+    if (!c.type_known) continue;  // its kind is not known yet: bound once its type message arrives
+    rig_plan::ObservedModule m;
+    m.id = c.id;
+    m.is_splitter = c.kind == ComponentKind::splitter;
+    m.kind = c.kind_name;
+    m.parent_id = c.parent_id == snap.base_id ? 0 : c.parent_id;
+    m.parent_outlet = c.parent_outlet == rig_bus::kNoOutlet ? 0 : c.parent_outlet;
+    observed_.push_back(std::move(m));
+  }
+  auto binding = rig_plan::bind_device(plan_, observed_);
+  if (!binding) return binding.error();
+  frame.binding_problems = binding->describe();
+  frame.q_in_out.assign(plan_.modules.size(), std::nullopt);
+  frame.joints_planned = 0;
+  frame.joints_live = 0;
+  double newest_age_s = std::numeric_limits<double>::infinity();
+  for (std::size_t m = 0; m < plan_.modules.size(); ++m) {
+    if (plan_.modules[m].type != rig_plan::DeviceModule::Type::joint) continue;
+    ++frame.joints_planned;
+    const std::uint32_t id = binding->observed_id[m];
+    if (id == 0) continue;
+    const auto* c = snap.find(id);
+    if (!c || !c->have_angles) continue;
+    const double age_s = static_cast<double>(c->angles_age_ns) * 1e-9;
+    newest_age_s = std::min(newest_age_s, age_s);
+    if (age_s > stale_after_s_) continue;
+    frame.q_in_out[m] = rig_device::joint_rotation(c->angles);
+    ++frame.joints_live;
+  }
+  frame.newest_reading_age_ms = std::isfinite(newest_age_s) ? 1e3 * newest_age_s : std::nan("");
+  return retargeter_.retarget(frame.q_in_out, frame.pose);
+}
+
 Result<std::unique_ptr<RigLiveSource>> RigLiveSource::create(const rig_plan::RigInput& input,
                                                              const rig_plan::Plan& plan,
                                                              const RigLiveOptions& options) {
   if (auto st = options.validate(); !st) return st.error();
   std::unique_ptr<RigLiveSource> s(new RigLiveSource());
   s->options_ = options;
-  s->plan_ = plan;
-  auto retargeter = rig_plan::Retargeter::create(input, plan, options.retarget);
-  if (!retargeter) return retargeter.error();
-  s->retargeter_.emplace(std::move(*retargeter));
+  auto poser = SnapshotPoser::create(input, plan, options.retarget, options.stale_after_s);
+  if (!poser) return poser.error();
+  s->poser_.emplace(std::move(*poser));
   if (options.device == "emulate") {
     auto tree = bus_tree_for_plan(plan, options.emulated.seed);
     if (!tree) return tree.error();
@@ -123,43 +169,7 @@ Status RigLiveSource::update(RigLiveFrame& frame) {
   const BusSnapshot snap = device_->snapshot();
   frame.time_ns = MonotonicClock::instance().now_ns();
   frame.t_s = static_cast<double>(frame.time_ns - start_ns_) * 1e-9;
-  observed_.clear();
-  frame.components_attached = 0;
-  for (const auto& c : snap.components) {
-    if (!c.attached) continue;
-    ++frame.components_attached;
-    if (c.kind == ComponentKind::base || c.id == snap.base_id) continue;
-    if (!c.type_known) continue;  // its kind is not known yet: bound once its type message arrives
-    rig_plan::ObservedModule m;
-    m.id = c.id;
-    m.is_splitter = c.kind == ComponentKind::splitter;
-    m.kind = c.kind_name;
-    m.parent_id = c.parent_id == snap.base_id ? 0 : c.parent_id;
-    m.parent_outlet = c.parent_outlet == rig_bus::kNoOutlet ? 0 : c.parent_outlet;
-    observed_.push_back(std::move(m));
-  }
-  auto binding = rig_plan::bind_device(plan_, observed_);
-  if (!binding) return binding.error();
-  frame.binding_problems = binding->describe();
-  frame.q_in_out.assign(plan_.modules.size(), std::nullopt);
-  frame.joints_planned = 0;
-  frame.joints_live = 0;
-  double newest_age_s = std::numeric_limits<double>::infinity();
-  for (std::size_t m = 0; m < plan_.modules.size(); ++m) {
-    if (plan_.modules[m].type != rig_plan::DeviceModule::Type::joint) continue;
-    ++frame.joints_planned;
-    const std::uint32_t id = binding->observed_id[m];
-    if (id == 0) continue;
-    const auto* c = snap.find(id);
-    if (!c || !c->have_angles) continue;
-    const double age_s = static_cast<double>(c->angles_age_ns) * 1e-9;
-    newest_age_s = std::min(newest_age_s, age_s);
-    if (age_s > options_.stale_after_s) continue;
-    frame.q_in_out[m] = rig_device::joint_rotation(c->angles);
-    ++frame.joints_live;
-  }
-  frame.newest_reading_age_ms = std::isfinite(newest_age_s) ? 1e3 * newest_age_s : std::nan("");
-  if (auto st = retargeter_->retarget(frame.q_in_out, frame.pose); !st) return st;
+  if (auto st = poser_->pose(snap, frame); !st) return st;
   if (emulated_) {
     const double t_emu_s = static_cast<double>(emulated_->emulator_now_ns()) * 1e-9;
     emulated_device_->animator().q_in_out(t_emu_s, truth_q_);

@@ -1,4 +1,5 @@
 #include "proprio/rig_plan/rig_reduction.hpp"
+#include "proprio/rig_plan/joint_ranges.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -139,7 +140,8 @@ std::string ReductionOptions::describe() const {
   std::ostringstream s;
   s << "joints: " << (max_joints < 0 ? std::string("all of the kit's") : "at most " + std::to_string(max_joints))
     << "; " << max_iterations << " remove/refill alternations at most; splitters "
-    << (use_splitters ? "on" : "off (phantoms only)") << "\n"
+    << (use_splitters ? "on" : "off (phantoms only)") << "; joints' rest settings "
+    << (center_joint_ranges ? "centred in their range where the stops need it" : "copying the rig at rest") << "\n"
     << fit.describe() << "\n"
     << splitters.describe();
   return s.str();
@@ -591,6 +593,9 @@ Result<Plan> reduce_rig(const RigInput& input, const rig_device::Kit& kit, const
       const Quat delta = j.q_parent_inlet.conjugate() * R_b * q_rest_b.conjugate() * j.q_parent_inlet;
       plan.device_poses[s][static_cast<std::size_t>(mi)] = (delta * j.q_in_out_rest).normalized();
     }
+  // A device shaped exactly like the rig at rest can need joints bent past
+  // their stops (joint_ranges.hpp); give those joints room both ways.
+  if (options.center_joint_ranges) center_joint_ranges(plan);
   return plan;
 }
 

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "proprio/rig_device/joint_kinematics.hpp"
+#include "proprio/rig_live/live_bench.hpp"
 #include "proprio/rig_live/plan_device.hpp"
 #include "proprio/rig_live/rig_live.hpp"
 #include "proprio/rig_plan/rig_reduction.hpp"
@@ -179,6 +180,39 @@ TEST(RigLiveSource, EmulatedDeviceBindsAndFollowsTheAnimator) {
   (*source)->stop();
   EXPECT_LT(worst_m, 0.05);
   EXPECT_GT((*source)->device_stats().host.messages, 0u);
+}
+
+// The same chain in simulated time: with exact angles and a clean bus the
+// only error left is the bus's latency on a slow animator; with the sensors
+// and the faults the device stays bound and close.
+TEST(LiveBench, CleanBusLeavesOnlyLatencyAndFaultsStayBounded) {
+  const auto in = small_rig();
+  const auto plan = small_plan(in);
+  LiveBenchOptions clean;
+  clean.seconds = 12.0;
+  clean.hall_sensors = false;
+  clean.faults = {};
+  auto a = run_live_bench(in, plan, clean);
+  ASSERT_TRUE(a.ok()) << a.error().message;
+  EXPECT_GT(a->frames, 500u);
+  EXPECT_GT(a->frames_all_live_fraction, 0.99);
+  EXPECT_EQ(a->host_detaches, 0u);
+  EXPECT_LT(a->joint_error_deg.mean, 1.0);
+  EXPECT_LT(a->node_error_percent.mean, 1.0);
+
+  LiveBenchOptions faulty;
+  faulty.seconds = 12.0;
+  faulty.faults.power_loss_interval_ns = 3 * kNsPerSecond;
+  auto b = run_live_bench(in, plan, faulty);
+  ASSERT_TRUE(b.ok()) << b.error().message;
+  EXPECT_GT(b->power_losses, 0u);
+  EXPECT_GT(b->joints_live_fraction, 0.7);
+  EXPECT_GE(b->node_error_m.mean, a->node_error_m.mean * 0.5);  // not better than the clean run by luck alone
+  EXPECT_TRUE(std::isfinite(b->node_error_m.max));
+
+  LiveBenchOptions bad;
+  bad.warmup_s = 100.0;
+  EXPECT_FALSE(run_live_bench(in, plan, bad).ok());
 }
 
 TEST(RigLiveOptions, RefusesNonsense) {

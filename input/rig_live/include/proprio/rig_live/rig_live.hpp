@@ -83,6 +83,28 @@ struct RigLiveFrame {
   std::size_t target_sample = 0;  // emulated: the sample pose the animator is at or heading to
 };
 
+// From a bus snapshot to a rig pose: the observed topology bound to the plan,
+// each bound, attached joint's fresh reading through the retargeter. The live
+// source and the simulated-time benchmark (live_bench.hpp) both pose with it.
+// One per thread; allocates only while the device grows.
+class SnapshotPoser {
+ public:
+  static Result<SnapshotPoser> create(const rig_plan::RigInput& input, const rig_plan::Plan& plan,
+                                      const rig_plan::RetargetOptions& options, double stale_after_s);
+  // Fills frame's pose, q_in_out, joint and component counts, binding
+  // problems and newest reading age (not its times, truth or target sample).
+  Status pose(const rig_bus::BusSnapshot& snapshot, RigLiveFrame& frame);
+  const rig_plan::Plan& plan() const { return plan_; }
+
+ private:
+  SnapshotPoser(rig_plan::Plan plan, rig_plan::Retargeter retargeter, double stale_after_s)
+      : plan_(std::move(plan)), retargeter_(std::move(retargeter)), stale_after_s_(stale_after_s) {}
+  rig_plan::Plan plan_;
+  rig_plan::Retargeter retargeter_;
+  double stale_after_s_;
+  std::vector<rig_plan::ObservedModule> observed_;
+};
+
 class RigLiveSource {
  public:
   static Result<std::unique_ptr<RigLiveSource>> create(const rig_plan::RigInput& input, const rig_plan::Plan& plan,
@@ -100,15 +122,13 @@ class RigLiveSource {
  private:
   RigLiveSource() = default;
   RigLiveOptions options_;
-  rig_plan::Plan plan_;
-  std::optional<rig_plan::Retargeter> retargeter_;
+  std::optional<SnapshotPoser> poser_;
   std::optional<rig_plan::Retargeter> truth_retargeter_;
   std::unique_ptr<EmulatedBusLink> emulated_;
   std::shared_ptr<EmulatedPlanDevice> emulated_device_;
   std::unique_ptr<rig_bus::RigBusDevice> usb_;
   rig_bus::RigBusDevice* device_ = nullptr;
   TimeNs start_ns_ = 0;
-  std::vector<rig_plan::ObservedModule> observed_;
   std::vector<Quat> truth_q_;
   std::vector<std::optional<Quat>> truth_opt_;
 };

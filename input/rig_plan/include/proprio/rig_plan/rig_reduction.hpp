@@ -39,6 +39,9 @@ struct ReductionOptions {
   // A joint is only placed while it lowers E by more than this fraction of
   // the rigid error.
   double min_relative_gain = 1e-9;
+  // Re-centre the rest settings of joints that would work near or past their
+  // stops (joint_ranges.hpp); off: the device copies the rig at rest exactly.
+  bool center_joint_ranges = true;
   FitOptions fit;
   SplitterIlpOptions splitters;
   Status validate() const;

@@ -622,18 +622,7 @@ void add_rig_commands(CLI::App& app, int& exit_code) {
     cmd->add_flag("--no-pose-space", d->no_pose_space, "undriven bones stay at rest (no pose-space interpolation)");
     cmd->add_flag("--no-truth", d->no_truth, "emulated device: do not draw the animator's pose beside it");
     d->faults.add(cmd);
-    auto* xr = cmd->add_flag("--xr", d->run.xr, "OpenXR session (stereo to the HMD)");
-    auto* window = cmd->add_flag("--window", d->run.window, "desktop window with a mouse/keyboard camera");
-    auto* headless = cmd->add_flag("--headless", d->run.headless, "frames to PNG files in --out (the default)");
-    xr->excludes(window)->excludes(headless);
-    window->excludes(headless);
-    cmd->add_option("--out", d->run.out, "headless: the frames' folder")->capture_default_str();
-    cmd->add_option("--size", d->run.size, "image size WIDTHxHEIGHT (per eye)")->capture_default_str();
-    cmd->add_option("--fps", d->run.fps, "headless: frames per second of wall time")
-        ->check(CLI::Range(0.5, 240.0))
-        ->capture_default_str();
-    cmd->add_flag("--software", d->run.software, "force Mesa's lavapipe (CPU) renderer");
-    cmd->add_flag("--no-hud", d->run.no_hud, "no engine status line");
+    add_live_view_options(cmd, d->run);
     cmd->callback([d, &exit_code] { exit_code = run_live(*d); });
   }
 }

@@ -91,6 +91,21 @@ int run(const RunArgs& a) {
 
 }  // namespace
 
+void add_live_view_options(CLI::App* cmd, RunArgs& a) {
+  auto* xr = cmd->add_flag("--xr", a.xr, "OpenXR session (stereo to the HMD)");
+  auto* window = cmd->add_flag("--window", a.window, "desktop window with a mouse/keyboard camera");
+  auto* headless = cmd->add_flag("--headless", a.headless, "frames to PNG files in --out (the default)");
+  xr->excludes(window)->excludes(headless);
+  window->excludes(headless);
+  cmd->add_option("--out", a.out, "headless: the frames' folder")->capture_default_str();
+  cmd->add_option("--size", a.size, "image size WIDTHxHEIGHT (per eye)")->capture_default_str();
+  cmd->add_option("--fps", a.fps, "headless: frames per second of wall time")
+      ->check(CLI::Range(0.5, 240.0))
+      ->capture_default_str();
+  cmd->add_flag("--software", a.software, "force Mesa's lavapipe (CPU) renderer");
+  cmd->add_flag("--no-hud", a.no_hud, "no engine status line");
+}
+
 Result<engine::AppOptions> app_options_from(const RunArgs& a) {
   engine::AppOptions o;
   o.output = a.xr ? OutputMode::xr : a.window ? OutputMode::window : a.headless ? OutputMode::headless

@@ -229,22 +229,11 @@ void add_run_array_demo_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--hid-path", d->hid_path, "--board usb: the board's hidraw node (default: the first stretch board)");
   cmd->add_option("--seed", d->seed, "the wearer's and the board's seed")->capture_default_str();
-  auto* xr = cmd->add_flag("--xr", d->run.xr, "OpenXR session (stereo to the HMD)");
-  auto* window = cmd->add_flag("--window", d->run.window, "desktop window with a mouse/keyboard camera");
-  auto* headless = cmd->add_flag("--headless", d->run.headless, "frames to PNG files in --out (the default)");
-  xr->excludes(window)->excludes(headless);
-  window->excludes(headless);
-  cmd->add_option("--out", d->run.out, "headless: the frames' folder")->capture_default_str();
-  cmd->add_option("--size", d->run.size, "image size WIDTHxHEIGHT (per eye)")->capture_default_str();
-  cmd->add_option("--fps", d->run.fps, "headless: frames per second of wall time")
-      ->check(CLI::Range(0.5, 240.0))
-      ->capture_default_str();
+  add_live_view_options(cmd, d->run);
   cmd->add_flag("--stereo", d->stereo, "headless: a stereo pair instead of one eye");
   cmd->add_option("--camera", d->run.camera, "headless camera: head (standing viewer) or orbit")
       ->check(CLI::IsMember({"head", "orbit"}))
       ->capture_default_str();
-  cmd->add_flag("--software", d->run.software, "force Mesa's lavapipe (CPU) renderer");
-  cmd->add_flag("--no-hud", d->run.no_hud, "no engine status line (the array line stays)");
   cmd->callback([d, &exit_code] {
     exit_code = array_demo::run_demo(*d);
     // `run`'s own callback (a scene) runs after a subcommand's; this ends the

@@ -12,6 +12,10 @@
 #include "proprio/engine/app.hpp"
 #include "proprio/haptics/servo_loop.hpp"
 
+namespace CLI {
+class App;
+}
+
 namespace proprio::cli {
 
 struct RunArgs {
@@ -48,6 +52,11 @@ struct RunArgs {
   std::string calibration;   // an HMD calibration (proprio run hmd-calibration) applied to what is drawn
   std::string tracker;       // peg-in-hole, --participant sim: ideal|ftm (empty: the design's, ideal by default)
 };
+
+// The output flags of a live view drawn by the engine (`run array-demo`,
+// `rig live`): --xr, --window or --headless (the default), --out, --size,
+// --fps (headless: frames per second of wall time), --software, --no-hud.
+void add_live_view_options(CLI::App* cmd, RunArgs& a);
 
 // The engine options the flags describe (output, size, frames, camera, ...).
 Result<engine::AppOptions> app_options_from(const RunArgs& a);

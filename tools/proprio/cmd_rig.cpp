@@ -154,7 +154,7 @@ int run_plan(const PlanArgs& a) {
   const auto ranges = rig_plan::joint_range_report(*plan);
   if (ranges.joints_past_stop > 0)
     std::printf("joints that cannot reach every sample pose (their bones follow as far as the stop allows):\n%s",
-                ranges.describe(*plan).c_str());
+                ranges.describe(*plan, &input.skeleton).c_str());
   else
     std::printf("every joint reaches every sample pose within its %.0f deg stop\n", ranges.limit_rad * 180.0 / M_PI);
   std::printf("planned in %.2f s\nwrote %s/{plan.json, assembly.txt, assembly.svg, error_curve.svg}\n", seconds,

@@ -133,7 +133,7 @@ Result<LiveBenchReport> run_live_bench(const rig_plan::RigInput& input, const ri
     for (const auto& rep : reports) host.on_report(rep.bytes, rep.send_ns + usb_ns);
     host.update(t);
     const auto snap = host.tracker().snapshot(t);
-    if (auto st = poser->pose(snap, frame); !st) return st.error();
+    if (auto st = poser->pose(snap, t, frame); !st) return st.error();
     if (t < warm_ns) continue;
     const double t_s = ns_to_seconds(t);
     (*device)->animator().q_in_out(t_s, truth_q);

@@ -79,7 +79,7 @@ Result<SnapshotPoser> SnapshotPoser::create(const rig_plan::RigInput& input, con
   return SnapshotPoser(plan, std::move(*retargeter), stale_after_s);
 }
 
-Status SnapshotPoser::pose(const BusSnapshot& snap, RigLiveFrame& frame) {
+Status SnapshotPoser::pose(const BusSnapshot& snap, TimeNs now_ns, RigLiveFrame& frame) {
   observed_.clear();
   frame.components_attached = 0;
   for (const auto& c : snap.components) {
@@ -109,7 +109,8 @@ Status SnapshotPoser::pose(const BusSnapshot& snap, RigLiveFrame& frame) {
     if (id == 0) continue;
     const auto* c = snap.find(id);
     if (!c || !c->have_angles) continue;
-    const double age_s = static_cast<double>(c->angles_age_ns) * 1e-9;
+    // The snapshot was published a moment ago; its ages are as of then.
+    const double age_s = static_cast<double>(c->angles_age_ns + std::max<TimeNs>(0, now_ns - snap.time_ns)) * 1e-9;
     newest_age_s = std::min(newest_age_s, age_s);
     if (age_s > stale_after_s_) continue;
     frame.q_in_out[m] = rig_device::joint_rotation(c->angles);
@@ -169,7 +170,7 @@ Status RigLiveSource::update(RigLiveFrame& frame) {
   const BusSnapshot snap = device_->snapshot();
   frame.time_ns = MonotonicClock::instance().now_ns();
   frame.t_s = static_cast<double>(frame.time_ns - start_ns_) * 1e-9;
-  if (auto st = poser_->pose(snap, frame); !st) return st;
+  if (auto st = poser_->pose(snap, frame.time_ns, frame); !st) return st;
   if (emulated_) {
     const double t_emu_s = static_cast<double>(emulated_->emulator_now_ns()) * 1e-9;
     emulated_device_->animator().q_in_out(t_emu_s, truth_q_);

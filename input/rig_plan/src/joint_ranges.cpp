@@ -65,14 +65,17 @@ JointRangeReport joint_range_report(const Plan& plan) {
   return r;
 }
 
-std::string JointRangeReport::describe(const Plan& plan) const {
+std::string JointRangeReport::describe(const Plan& plan, const Skeleton* skeleton) const {
   std::ostringstream s;
   const double deg = 180.0 / M_PI;
   for (const auto& j : joints) {
     if (j.rest_shaft_rad <= limit_rad && j.samples_past_stop == 0) continue;
     s << "module " << (j.module + 1) << " (joint";
-    if (j.module >= 0 && plan.modules[static_cast<std::size_t>(j.module)].rig_node >= 0)
-      s << " on rig node " << plan.modules[static_cast<std::size_t>(j.module)].rig_node;
+    const int node = plan.modules[static_cast<std::size_t>(j.module)].rig_node;
+    if (skeleton && node >= 0 && static_cast<std::size_t>(node) < skeleton->size())
+      s << " driving '" << skeleton->names[static_cast<std::size_t>(node)] << "'";
+    else if (node >= 0)
+      s << " driving rig node " << node;
     s << "): " << j.samples_past_stop << " of " << plan.device_poses.size()
       << " sample poses need its shafts bent past the " << std::lround(limit_rad * deg) << " deg stop (up to "
       << std::lround(j.max_shaft_rad * deg) << " deg)";

@@ -92,8 +92,9 @@ class SnapshotPoser {
   static Result<SnapshotPoser> create(const rig_plan::RigInput& input, const rig_plan::Plan& plan,
                                       const rig_plan::RetargetOptions& options, double stale_after_s);
   // Fills frame's pose, q_in_out, joint and component counts, binding
-  // problems and newest reading age (not its times, truth or target sample).
-  Status pose(const rig_bus::BusSnapshot& snapshot, RigLiveFrame& frame);
+  // problems and newest reading age at now_ns (not its times, truth or
+  // target sample). A reading older than the stale limit at now_ns is missing.
+  Status pose(const rig_bus::BusSnapshot& snapshot, TimeNs now_ns, RigLiveFrame& frame);
   const rig_plan::Plan& plan() const { return plan_; }
 
  private:

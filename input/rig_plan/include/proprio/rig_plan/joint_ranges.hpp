@@ -38,7 +38,8 @@ struct JointRangeReport {
   double limit_rad = 0.0;
   std::vector<Joint> joints;       // one per joint module, in plan order
   int joints_past_stop = 0;        // joints with any sample (or the rest) past the stop
-  std::string describe(const Plan& plan) const;  // lines for the joints past their stop
+  // Lines for the joints past their stop; node names from the skeleton when given.
+  std::string describe(const Plan& plan, const Skeleton* skeleton = nullptr) const;
 };
 
 JointRangeReport joint_range_report(const Plan& plan);
